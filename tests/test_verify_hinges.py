@@ -291,3 +291,146 @@ def test_a_universal_rods_level_is_where_its_servo_first_reaches_its_limit():
     assert potential(config, q) == pytest.approx(closed, rel=1e-12)
     rng = np.random.default_rng(4)
     _kernel_holds(config, lambda e: [e + rng.normal(scale=0.3, size=2) for _ in range(6)], rng)
+
+
+# -- balls: a quaternion ball's rotation vector --------------------------------------------------------
+def _ball_rod(k=(60.0, 60.0, 60.0), limit=6.0, mass=2.0, d=0.5, **joint):
+    """:func:`_rod` on a quaternion ball: a servo k_i, l_i on each entry of the rotation vector
+    phi of its turn from its reference, clipped to +-limit [N m] per axis."""
+    data = _rod(limit=limit, mass=mass, d=d)
+    data["joints"][0] = {**{key: data["joints"][0][key] for key in ("name", "parent", "parent_point", "child",
+                                                                   "child_point")},
+                         "variant": "ball", "k_r": list(k), "l_r": [8.0, 8.0, 1.0],
+                         "saturation": {"torque_n": [limit] * 3}, **joint}
+    data["initial_state"] = {}
+    return data
+
+
+def _ball_v(config, phi) -> float:
+    """The compiled model's v [J] at rest at the ball's turn ``phi`` from its reference
+    (its A_rel = A(Theta_ref) exp(phi), written as the child's initial rotation vector)."""
+    from scipy.spatial.transform import Rotation
+
+    ref = np.array(config.chain.joints[0].theta_ref, dtype=float)
+    theta = (Rotation.from_rotvec(ref) * Rotation.from_rotvec(phi)).as_rotvec()
+    compiled = C.compile_chain(config.chain)
+    layout = tree_layout(compiled)
+    w = Rotation.from_rotvec(theta).as_quat()  # (x, y, z, w)
+    yr = np.zeros(layout.n_r)
+    yr[:4] = [w[3], w[0], w[1], w[2]]
+    y = expand_state(compiled, layout, yr)
+    scalars = np.empty(5)
+    C.chain_core(0.0, y, *compiled.args, np.empty(compiled.n_states), np.empty((1, 7, 3)), np.empty((1, 3)), scalars)
+    return float(scalars[:4].sum() + compiled.offset)
+
+
+def test_a_ball_rods_level_is_where_its_servo_first_reaches_its_limit():
+    """One inverted rod on a quaternion ball with an isotropic servo k clipped to +-limit on
+    each axis: -J_r(phi)^-T K phi = -k phi, and P(phi) = 1/2 k |phi|^2 + m g d (A_33 - 1),
+    A_33 = cos t + (1 - cos t) phi_3^2 / t^2 (t = |phi|); the proof stops at the level of the
+    universal rod's closed form, where an axis's torque first clips, naming the entry of phi."""
+    k, limit, mass, d = 60.0, 6.0, 2.0, 0.5
+    config = config_from_mapping(_ball_rod(k=(k, k, k), limit=limit, mass=mass, d=d))
+    mgd = mass * 9.81 * d
+    onset = 0.5 * k * (limit / k) ** 2 + mgd * (math.cos(limit / k) - 1.0)
+    result = verify_sublevel(config)
+    assert (1 - 0.011) * onset <= result.level <= onset, (result.level, onset)
+    assert "ankle.phi_" in result.reason and "[-6, 6] N m" in result.reason
+    phi = np.array([0.3, -0.2, 0.4])
+    t = np.linalg.norm(phi)
+    a33 = math.cos(t) + (1 - math.cos(t)) * phi[2] ** 2 / t ** 2
+    assert potential(config, phi) == pytest.approx(0.5 * k * phi @ phi + mgd * (a33 - 1.0), rel=1e-12)
+    with pytest.raises(NotVerifiable, match=r"not proven: box q in .*ankle\.phi_.*reaches its limits"):
+        verify_sublevel(config, level=1.5 * onset)
+
+
+def test_the_interval_kernel_holds_a_balls_compiled_v_its_gradient_and_hessian():
+    """A rod on a ball turned from its reference (Theta_ref a rotation vector), anisotropic
+    servo gains, a passive spring relaxed at the same reference: on random small boxes of
+    phi (some across phi = 0, where the series of the rotation's coefficients are used at
+    s = |phi|^2 = 0), the compiled v at rest lies in P(box), its central-difference gradient
+    and Hessian in the kernel's; its commanded torque -J_r^-T K phi (rbstab.kinematics) in
+    the kernel's."""
+    from flint import arb
+
+    from rbstab.kinematics import right_jacobian_inverse
+
+    data = _ball_rod(k=(60.0, 40.0, 10.0), theta_ref=[0.1, -0.05, 0.2],
+                     passive={"k_r": [5.0, 3.0, 1.0], "l_r": [0.5, 0.5, 0.5], "theta_ref": [0.1, -0.05, 0.2]})
+    config = config_from_mapping(data)
+    model, equilibrium = _model(config, arb)
+    assert abs(_ball_v(config, equilibrium)) < 1e-9  # v's zero at the rest state
+    rng = np.random.default_rng(3)
+    h, eye = 1e-4, np.eye(3) * 1e-4
+    centres = [equilibrium + rng.normal(scale=0.4, size=3) for _ in range(5)] + [np.zeros(3)]
+    for centre in centres:
+        lo, hi = centre - rng.uniform(0.0005, 0.002, 3), centre + rng.uniform(0.0005, 0.002, 3)
+        p_box, grad, tau, hess = model.evaluate(lo, hi, hessian=True)
+        for x in rng.uniform(lo, hi, (4, 3)):
+            v0 = _ball_v(config, x)
+            assert float(p_box.lower()) - 1e-9 <= v0 <= float(p_box.upper()) + 1e-9
+            torque = -np.asarray(right_jacobian_inverse(tuple(x))).T @ (np.array([60.0, 40.0, 10.0]) * x)
+            for a in range(3):
+                assert float(tau[a].lower()) - 1e-12 <= torque[a] <= float(tau[a].upper()) + 1e-12
+                g = (_ball_v(config, x + eye[a]) - _ball_v(config, x - eye[a])) / (2 * h)
+                assert float(grad[a].lower()) - 1e-5 * (1 + abs(g)) <= g <= float(grad[a].upper()) + 1e-5 * (1 + abs(g))
+                for b in range(3):
+                    hs = (_ball_v(config, x + eye[a] + eye[b]) - _ball_v(config, x + eye[a] - eye[b])
+                          - _ball_v(config, x - eye[a] + eye[b]) + _ball_v(config, x - eye[a] - eye[b])) / (4 * h * h)
+                    slack = 2e-3 * (1 + abs(hs))
+                    assert float(hess[a][b].lower()) - slack <= hs <= float(hess[a][b].upper()) + slack
+
+
+def test_a_balls_verified_level_holds_where_its_runs_go():
+    """The anisotropic ball rod with its cone an admissible region: its verified c is below
+    P at points on the cone, and runs from rest on {v = c} (turns in random directions,
+    written as the child's Euler angles) never rise above c, never leave the cone and come
+    back."""
+    from scipy.spatial.transform import Rotation
+
+    ref = np.array([0.1, -0.05, 0.0])
+    data = _ball_rod(k=(60.0, 40.0, 10.0), theta_ref=ref.tolist(), range={"lower": 0.0, "upper": 0.5, "kind": "region"})
+    data["simulation"].update(t_end=8.0, n_samples=161, rtol=1e-9, atol=1e-11)
+    config = config_from_mapping(data)
+    proven = verify_sublevel(config, rtol=0.05)
+    assert proven.level > 0.0
+    rng = np.random.default_rng(2)
+    for e in rng.normal(size=(20, 3)):  # P at turns of 0.5 rad, on the cone, is above c
+        on_cone = (Rotation.from_rotvec(ref).inv() * Rotation.from_rotvec(0.5 * e / np.linalg.norm(e))).as_rotvec()
+        assert potential(config, on_cone) > proven.level
+    for direction in rng.normal(size=(4, 3)):
+        direction /= np.linalg.norm(direction)
+        low, high = 0.0, 3.0
+        for _ in range(60):  # the turn along ``direction`` with P = c
+            mid = 0.5 * (low + high)
+            low, high = (mid, high) if potential(config, mid * direction) < proven.level else (low, mid)
+        theta = (Rotation.from_rotvec(ref) * Rotation.from_rotvec(low * direction)).as_euler("XYZ")  # A = Rx Ry Rz
+        result = simulate(config_from_mapping({**config.resolved, "initial_state": {"rod": {"theta": theta.tolist()}}}))
+        v = result.outputs["lyapunov"]
+        assert result.status == "success", result.message
+        assert v[0] == pytest.approx(proven.level, rel=1e-6)
+        assert v.max() <= v[0] * (1 + 1e-9) and v[-1] < 0.05 * v[0]
+
+
+@pytest.mark.parametrize("change, expected", [
+    (lambda j: j.update(range={"lower": 0.0, "upper": 0.5, "k_r": 100.0}), "joints.ankle.range: found a stop"),
+    (lambda j: j.update(passive={"k_r": [1.0, 1.0, 1.0], "l_r": [0.1] * 3, "theta_ref": [0.1, 0.0, 0.0]}),
+     "joints.ankle.passive.theta_ref"),
+    (lambda j: j.update(l_r=[8.0, 8.0, 0.0]), "joints.ankle.l_r: found"),
+    (lambda j: j.update(k_r=[[60.0, 1.0, 0.0], [1.0, 60.0, 0.0], [0.0, 0.0, 60.0]]), "non-diagonal"),
+])
+def test_what_the_ball_proof_does_not_cover_is_refused_in_one_line(change, expected):
+    data = _ball_rod()
+    change(data["joints"][0])
+    with pytest.raises(NotVerifiable, match=expected):
+        verify_sublevel(config_from_mapping(data))
+
+
+def test_a_tree_with_a_ball_above_six_states_is_refused_in_one_line():
+    data = _ball_rod()
+    data["bodies"].append({"name": "head", "mass": 1.0, "inertia": [0.01, 0.01, 0.01]})
+    data["joints"].append({"name": "neck", "parent": "rod", "parent_point": [0.0, 0.0, 0.5], "child": "head",
+                           "child_point": [0.0, 0.0, -0.1], "variant": "hinge", "axis": [1.0, 0.0, 0.0], "k_r": 5.0,
+                           "l_r": 1.0})
+    with pytest.raises(NotVerifiable, match="this tree has 8 states; --verify covers at most 6"):
+        verify_sublevel(config_from_mapping(data))

@@ -45,6 +45,7 @@ __all__ = [
     "linearise",
     "linearise_chain",
     "coordinates_of",
+    "ball_entries",
     "coordinates_state",
     "linearise_config",
     "undisturbed",
@@ -416,7 +417,7 @@ def reduced_rates(compiled, z, t=0.0) -> np.ndarray:
     return dy[:, compiled.independent_columns]
 
 
-def _ball_entries(compiled) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int]]]:
+def ball_entries(compiled) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int]]]:
     """How a tree's linearisation coordinates z (:func:`coordinates_of`) sit in its reduced
     state: (the entries of z, the entries of the reduced state they are, one to one; each
     quaternion ball's (start in z of its rotation vector phi, start in the reduced state of
@@ -444,7 +445,7 @@ def _ball_entries(compiled) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int
 def _reduced_of_coordinates(compiled, z: np.ndarray) -> np.ndarray:
     """The reduced states (k, n_r) of the coordinates ``z`` (k, m): a quaternion ball's
     quaternion (cos(|phi|/2), sin(|phi|/2) phi / |phi|) of its rotation vector phi."""
-    z_index, r_index, balls = _ball_entries(compiled)
+    z_index, r_index, balls = ball_entries(compiled)
     if not balls:
         return z
     out = np.empty((len(z), z.shape[1] + len(balls)))
@@ -461,7 +462,7 @@ def _reduced_of_coordinates(compiled, z: np.ndarray) -> np.ndarray:
 def _coordinates_of_reduced(compiled, reduced: np.ndarray) -> np.ndarray:
     """The coordinates z (k, m) of the reduced states ``reduced`` (k, n_r): a quaternion
     ball's rotation vector phi (|phi| <= pi) of its quaternion."""
-    z_index, r_index, balls = _ball_entries(compiled)
+    z_index, r_index, balls = ball_entries(compiled)
     if not balls:
         return reduced
     out = np.empty((len(reduced), reduced.shape[1] - len(balls)))
@@ -478,7 +479,7 @@ def _coordinates_of_reduced(compiled, reduced: np.ndarray) -> np.ndarray:
 def _coordinate_rates(compiled, z: np.ndarray, rates: np.ndarray) -> np.ndarray:
     """dz/dt (k, m) at the coordinates ``z`` of the reduced states' rates ``rates`` (k,
     n_r): a quaternion ball's dphi/dt = J_r(phi)^-1 Omega_j."""
-    z_index, r_index, balls = _ball_entries(compiled)
+    z_index, r_index, balls = ball_entries(compiled)
     if not balls:
         return rates
     out = np.empty_like(z)

@@ -33,9 +33,10 @@ Then {v <= c} n D is positively invariant, dv/dt = 0 only where Omega = 0, and t
 largest invariant set there consists of rest points (grad P = 0 with Omega = 0): only the
 equilibrium. By LaSalle's invariance principle every run from the set converges to it.
 
-A tree of hinges, slides and universal joints of at most 6 states (:class:`_TreeModel`)
+A tree of hinges, slides, universal joints and balls of at most 6 states (:class:`_TreeModel`)
 is proven the same way over boxes of their coordinates q (a hinge's angle [rad], a slide's
-displacement [m], a universal joint's two angles): v =
+displacement [m], a universal joint's two angles, a ball's rotation vector phi of its turn
+from its reference, inside its chart |phi| < :data:`BALL_CHART`): v =
 1/2 u' M(q) u + P(q), P the joints' springs and stops, gravity on X_i(q) and h; tau_j =
 -k_j (q_j - q_ref_j) (a slide's force) between the servo's own lower and upper limits; the
 domain half a turn (a slide's :data:`SLIDE_SEARCH`) either side of each reference, and every
@@ -74,6 +75,9 @@ MAX_BOXES = 400_000
 #: [m]: the search domain of a slide's q, either side of its reference (a hinge's: half a
 #: turn), within its range where that is an admissible region.
 SLIDE_SEARCH = 1.0
+#: [rad]: the largest turn |phi| of a ball's rotation vector phi = log(A(Theta_ref)' A_rel) the
+#: proof's domain holds (the chart: exp is a diffeomorphism onto its image for |phi| < pi).
+BALL_CHART = math.pi - 0.05
 
 
 class NotVerifiable(ValueError):
@@ -123,47 +127,41 @@ class Verification:
 
 # -- what is covered ----------------------------------------------------------------------------
 #: The joints on coordinates along axes that the proof of a tree covers, by their coordinates.
-_COVERED = {"hinge": 1, "slide": 1, "universal": 2}
+_COVERED = {"hinge": 1, "slide": 1, "universal": 2, "ball": 3}
 
 
 def _hinged(config) -> bool:
-    """Whether the tree has a joint on coordinates along axes (a hinge, a slide, a universal
-    joint): the proof of a tree of those."""
+    """Whether the tree has a joint on coordinates of its own (a hinge, a slide, a universal
+    joint, a quaternion ball): the proof of a tree of those."""
     return any(j.variant in _COVERED for j in config.chain.joints)
 
 
 def verified_model(config):
     """The configuration the proof is of: ``config`` where its tree is one body held to the
-    ground by its joint (in either spelling, the ground point anywhere), or a tree of at
-    hinges, slides and universal joints of at most 6 states.
+    ground by its joint (in either spelling, the ground point anywhere), or a tree of
+    hinges, slides, universal joints and balls of at most 6 states.
 
     Raises
     ------
     NotVerifiable
         For another tree of several bodies (one line: why)."""
     bodies = config.chain.size
-    uncovered = [j for j in config.chain.joints if j.variant == "ball"]
-    if uncovered:
-        raise NotVerifiable(f"joints.{uncovered[0].name}.variant: found {uncovered[0].variant!r}; --verify covers one "
-                            "body on a permanent joint (the reduced 6-state model, eq 21) or a tree of hinges, slides "
-                            "and universal joints of at most 6 states")
     if _hinged(config):
         others = [j for j in config.chain.joints if j.variant not in _COVERED]
         if others:
             raise NotVerifiable(f"joints.{others[0].name}.variant: found {others[0].variant!r} in a tree with a "
-                                "hinge, a slide or a universal joint; --verify covers a tree whose every joint is one "
-                                "of those")
+                                "hinge, a slide, a universal joint or a ball; --verify covers a tree whose every joint "
+                                "is one of those")
         states = sum(2 * _COVERED[j.variant] for j in config.chain.joints)
         if states > 6:
             raise NotVerifiable(f"this tree has {states} states; --verify covers at most 6 (3 hinges or slides, a "
-                                "universal joint counting 2: interval arithmetic over boxes of their coordinates)")
+                                "universal joint counting 2, a ball 3: interval arithmetic over boxes of their "
+                                "coordinates)")
         return config
     if bodies > 1:
-        raise NotVerifiable(f"the proof covers one body held to the ground by a permanent joint, the reduced "
-                            f"6-state model of 'permanent' (eq 21), or a tree of hinges, slides and universal joints "
-                            "of at most 6 states; this "
-                            "chain has "
-                            f"{bodies} bodies")
+        raise NotVerifiable("the proof covers one body held to the ground by a permanent joint, the reduced "
+                            "6-state model of 'permanent' (eq 21), or a tree of hinges, slides, universal joints and "
+                            f"balls of at most 6 states; this chain has {bodies} bodies")
     return config
 
 
@@ -232,6 +230,9 @@ def _check_hinges(config) -> None:
     pi/2) in ``simulation.limits``."""
     chain = config.chain
     for joint in chain.joints:
+        if joint.variant == "ball":
+            _check_ball(joint)
+            continue
         axis = np.asarray(joint.axis, dtype=float)
         axis = axis / np.linalg.norm(axis)
         l_r = float(np.asarray(joint.l_r, dtype=float)[0, 0] if joint.variant == "slide"  # along its axis
@@ -260,6 +261,34 @@ def _check_hinges(config) -> None:
         if np.any(np.isfinite(bounds[0]) & (bounds[0] >= GIMBAL_LOCK_ANGLE)):
             raise NotVerifiable(f"simulation.limits.theta: found {bounds[0].tolist()}; --verify of a tree of hinges "
                                 "covers bounds below pi/2")
+
+
+def _check_ball(joint) -> None:
+    """What the proof of a ball covers: diagonal K_r, L_r (every L_r_i > 0) and passive
+    gains, its passive spring relaxed at its spring's reference (one rotation vector phi
+    for both), no stop (its cone as an admissible region is covered), clipped limits."""
+    key = f"joints.{joint.name}"
+    gains = [("k_r", joint.k_r), ("l_r", joint.l_r)]
+    if joint.passive is not None:
+        gains += [("passive.k_r", joint.passive.k_r), ("passive.l_r", joint.passive.l_r)]
+    for name, gain in gains:
+        gain = np.asarray(gain, dtype=float)
+        if np.any(gain - np.diag(np.diag(gain))):
+            raise NotVerifiable(f"{key}.{name}: found a non-diagonal matrix {gain.tolist()}; --verify of a ball "
+                                "covers diagonal gains (its springs axis by axis on the rotation vector)")
+    if not np.all(np.diag(np.asarray(joint.l_r, dtype=float)) > 0.0):
+        raise NotVerifiable(f"{key}.l_r: found {np.diag(joint.l_r).tolist()}; --verify needs every l_r_i > 0 "
+                            "(LaSalle's argument: dv/dt = 0 only where Omega_j = 0)")
+    if joint.passive is not None and not np.array_equal(joint.passive.theta_ref, joint.theta_ref):
+        raise NotVerifiable(f"{key}.passive.theta_ref: found {np.asarray(joint.passive.theta_ref).tolist()}; "
+                            f"--verify of a ball covers a passive spring relaxed at theta_ref "
+                            f"{np.asarray(joint.theta_ref).tolist()} (one rotation vector for both)")
+    if joint.stop is not None:
+        raise NotVerifiable(f"{key}.range: found a stop; --verify of a ball covers its range as an admissible region "
+                            "(kind: region), not a stop")
+    if joint.saturation is not None and joint.saturation.shape != "clip":
+        raise NotVerifiable(f"{key}.saturation.shape: found {joint.saturation.shape!r}; --verify covers 'clip' (a "
+                            "smooth saturation delivers less than the commanded torque at every state)")
 
 
 # -- interval kernels (3-vectors and 3x3 matrices as lists of arb) -----------------------------
@@ -319,6 +348,72 @@ def _mm(a, b):
 
 def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+# -- a ball's rotation vector: exp([phi]x) and J_r(phi)^-T as power series in s = |phi|^2 --------------------
+#: Terms of the series below summed by Horner's rule; the rest is bounded by twice its first term.
+_TERMS = 30
+
+
+def _factorial_series(offset: int, derivative: int) -> list:
+    """Coefficients (exact rationals) of the ``derivative``-th derivative in s of
+    sum_k (-1)^k s^k / (2k + offset)!: cos t (offset 0), sin t / t (1), (1 - cos t) / t^2 (2),
+    t = sqrt(s)."""
+    from flint import fmpq  # optional: the verify extra (python-flint)
+
+    out = []
+    for k in range(_TERMS + 1):
+        m = k + derivative
+        factor = math.prod(range(k + 1, m + 1))  # d^n/ds^n s^m = m!/k! s^k
+        out.append(fmpq((-1) ** m * factor, math.factorial(2 * m + offset)))
+    return out
+
+
+def _bernoulli_series() -> list:
+    """Coefficients of c(s) = 1/t^2 - (1 + cos t) / (2 t sin t) = sum_n |B_2n+2| s^n / (2n + 2)!
+    (t = sqrt(s) < 2 pi), the J_r(phi)^-1 coefficient of [phi]x^2
+    (:func:`rbstab.kinematics.right_jacobian_inverse`)."""
+    from flint import fmpq  # optional: the verify extra (python-flint)
+
+    return [abs(fmpq.bernoulli(2 * n + 2)) / math.factorial(2 * n + 2) for n in range(_TERMS + 1)]
+
+
+_SERIES: dict = {}
+
+
+def _series(arb, kind, s):
+    """The power series ``kind`` ((offset, derivative) of :func:`_factorial_series`, or
+    "c" of :func:`_bernoulli_series`) over the arb ball s: Horner's sum of its first
+    :data:`_TERMS` terms and a ball of twice the next term's size at S = sup |s| (each later
+    term at most half the one before: checked, else the whole real line)."""
+    if kind not in _SERIES:
+        coefficients = _bernoulli_series() if kind == "c" else _factorial_series(*kind)
+        _SERIES[kind] = [arb(c) for c in coefficients]
+    c = _SERIES[kind]
+    big = abs(s).upper()
+    ratio = float(abs(c[_TERMS]).upper()) * float(big) / float(abs(c[_TERMS - 1]).lower())
+    limit = 1.1 / (4.0 * math.pi ** 2) if kind == "c" else 0.0  # the c series: ratio s / (2 pi)^2 at most
+    if ratio > 0.5 or limit * float(big) > 0.5:
+        return arb(0, 1e300)
+    total = c[_TERMS - 1]
+    for k in range(_TERMS - 2, -1, -1):
+        total = total * s + c[k]
+    rest = 2 * abs(c[_TERMS]) * big ** _TERMS
+    return total + arb(0, math.nextafter(float(rest.upper()), math.inf) * (1.0 + 1e-15) + 1e-300)
+
+
+def _rodrigues_values(arb, phi, square):
+    """exp([phi]x) = cos t I + (1 - cos t)/t^2 phi phi' + sin t / t [phi]x (t = |phi|) of a
+    rotation vector ``phi`` (3 arb balls) whose squared size is the arb ball ``square``."""
+    c0, c1, c2 = (_series(arb, (offset, 0), square) for offset in (0, 1, 2))
+    x, y, z = phi
+    return [[c0 + c2 * x * x, c2 * x * y - c1 * z, c2 * x * z + c1 * y],
+            [c2 * x * y + c1 * z, c0 + c2 * y * y, c2 * y * z - c1 * x],
+            [c2 * x * z - c1 * y, c2 * y * z + c1 * x, c0 + c2 * z * z]]
 
 
 class _Model:
@@ -549,13 +644,19 @@ class _TreeModel:
         self.parents = [int(q) for q in compiled.parents]
         self.kinds = [compiled.chain.joints[j].variant for j in range(compiled.size)]
         # each coordinate's joint and entry (a universal joint's two), and each joint's first coordinate
-        self.joint_of = [(j, k) for j, kind in enumerate(self.kinds) for k in range(2 if kind == "universal" else 1)]
+        self.joint_of = [(j, k) for j, kind in enumerate(self.kinds) for k in range(_COVERED[kind])]
         self.first = [next(c for c, (i, _) in enumerate(self.joint_of) if i == j) for j in range(compiled.size)]
         self.dim = n = len(self.joint_of)
         names = list(compiled.chain.joint_names)
         self.joint_names = [names[j] for j, _ in self.joint_of]
-        self.names = [f"{names[j]}.q_{k + 1}" if self.kinds[j] == "universal" else names[j] for j, k in self.joint_of]
+        self.names = [f"{names[j]}.q_{k + 1}" if self.kinds[j] == "universal" else
+                      f"{names[j]}.phi_{k + 1}" if self.kinds[j] == "ball" else names[j] for j, k in self.joint_of]
         self.slides = [self.kinds[j] == "slide" for j, _ in self.joint_of]
+        # a ball's coordinates: the rotation vector phi of its turn from its reference, A_rel = A(Theta_ref) exp(phi)
+        self.frames = [_rodrigues_values(arb, [arb(float(x)) for x in p["theta_ref"]],
+                                         sum(arb(float(x)) ** 2 for x in p["theta_ref"])) for p in params]
+        self.cones = [float(p["range_upper"][0]) if kind == "ball" and p["region"] > 0 else None
+                      for kind, p in zip(self.kinds, params)]
         self.axes = [[arb(float(x)) for x in p["axis"]] for p in params]
         self.axes_2 = [[arb(float(x)) for x in p["axis_2"]] for p in params]
         # a hinge's numbers about its axis (its records' 3-vectors q a), a slide's in entry 0, a universal joint's
@@ -563,9 +664,11 @@ class _TreeModel:
         along = [np.asarray(params[j]["axis"], dtype=float) if self.kinds[j] == "hinge" else np.eye(3)[k]
                  for j, k in self.joint_of]
         coordinate_params = [params[j] for j, _ in self.joint_of]
-        quad = [(float(a @ p["k_r"] @ a), float(a @ p["theta_ref"])) for a, p in zip(along, coordinate_params)]
-        passive = [(float(a @ p["passive_k_r"] @ a), float(a @ p["passive_theta_ref"])) if p["passive"] > 0
-                   else (0.0, 0.0) for a, p in zip(along, coordinate_params)]
+        ball = [self.kinds[j] == "ball" for j, _ in self.joint_of]  # its springs' references: phi = 0
+        quad = [(float(a @ p["k_r"] @ a), 0.0 if b else float(a @ p["theta_ref"]))
+                for a, p, b in zip(along, coordinate_params, ball)]
+        passive = [(float(a @ p["passive_k_r"] @ a), 0.0 if b else float(a @ p["passive_theta_ref"]))
+                   if p["passive"] > 0 else (0.0, 0.0) for a, p, b in zip(along, coordinate_params, ball)]
         self.springs = [(k, r, kp, rp) for (k, r), (kp, rp) in zip(quad, passive)]
         total = np.array([k + kp for k, _, kp, _ in self.springs])
         self.k_r = np.diag(total)
@@ -574,7 +677,8 @@ class _TreeModel:
         self.stops = [(float(params[j]["range_lower"][k]), float(params[j]["range_upper"][k]),
                        float(params[j]["stop_k"][k])) if params[j]["stop"] > 0 else None for j, k in self.joint_of]
         # a range that is an admissible region: the domain's faces there (a run that reaches one fell)
-        self.ranges = np.array([(params[j]["range_lower"][k], params[j]["range_upper"][k]) if params[j]["region"] > 0
+        self.ranges = np.array([(params[j]["range_lower"][k], params[j]["range_upper"][k])
+                                if params[j]["region"] > 0 and self.kinds[j] != "ball"  # a ball's cone: region()
                                 else (-np.inf, np.inf) for j, k in self.joint_of], dtype=float)
         self.R_c = [[arb(float(x)) for x in p["attachment_point"]] for p in params]
         self.R_p = [[arb(float(x)) for x in r] for r in compiled.ppoints]
@@ -699,6 +803,53 @@ class _TreeModel:
                 [vers * (x * y) + sin * z, cos + vers * (y * y), vers * (y * z) - sin * x],
                 [vers * (x * z) - sin * y, vers * (y * z) + sin * x, cos + vers * (z * z)]]
 
+    def _size(self, lo, hi):
+        """|phi|^2 over the box [lo, hi] of a rotation vector (3,), tight."""
+        return self._square(lo[0], hi[0], 0.0) + self._square(lo[1], hi[1], 0.0) + self._square(lo[2], hi[2], 0.0)
+
+    def _rodrigues(self, phi, lo, hi, c: int, hessian: bool):
+        """exp([phi]x) (:func:`_rodrigues_values`) as a matrix of jets in coordinates c, c + 1,
+        c + 2, phi the arb balls ``phi`` of the box [lo, hi]: each coefficient f(s) of
+        s = |phi|^2 a jet by the chain rule, f'(s) grad s and f''(s) grad s grad s' + f'(s) H s."""
+        arb, zero, n = self.arb, self.zero, self.dim
+        g_s = [zero] * n
+        for k in range(3):
+            g_s[c + k] = 2 * phi[k]
+        h_s = None
+        if hessian:
+            h_s = [[zero] * n for _ in range(n)]
+            for k in range(3):
+                h_s[c + k][c + k] = arb(2)
+        s = _Jet(self._size(lo, hi), g_s, h_s)
+        coefficients = []
+        for offset in (0, 1, 2):
+            f, df = _series(arb, (offset, 0), s.v), _series(arb, (offset, 1), s.v)
+            h = None
+            if hessian:
+                ddf = _series(arb, (offset, 2), s.v)
+                h = [[ddf * s.g[a] * s.g[b] + df * s.h[a][b] for b in range(n)] for a in range(n)]
+            coefficients.append(_Jet(f, [df * g for g in s.g], h))
+        c0, c1, c2 = coefficients
+        x, y, z = (self._coordinate(phi[k], c + k, hessian) for k in range(3))
+        return [[c0 + c2 * x * x, c2 * x * y - c1 * z, c2 * x * z + c1 * y],
+                [c2 * x * y + c1 * z, c0 + c2 * y * y, c2 * y * z - c1 * x],
+                [c2 * x * z - c1 * y, c2 * y * z + c1 * x, c0 + c2 * z * z]]
+
+    def _coordinate(self, x, c: int, hessian: bool):
+        """Coordinate c over the arb ball x as a jet."""
+        g = [self.zero] * self.dim
+        g[c] = self.one
+        return _Jet(x, g, [[self.zero] * self.dim for _ in range(self.dim)] if hessian else None)
+
+    def _ball_torque(self, phi, lo, hi, c: int):
+        """A ball's commanded torque at rest -J_r(phi)^-T K phi [N m] (child frame; K its
+        diagonal k_r, J_r^-1 = I + 1/2 [phi]x + c(s) [phi]x^2) over the arb balls ``phi``."""
+        kphi = [self.arb(self.springs[c + k][0]) * phi[k] for k in range(3)]
+        w = _cross(phi, kphi)
+        u = _cross(phi, w)
+        factor = _series(self.arb, "c", self._size(lo, hi))
+        return [-(kphi[k] - 0.5 * w[k] + factor * u[k]) for k in range(3)]
+
     def evaluate(self, lo, hi, hessian: bool = False):
         """(P, grad P, tau) over the box [lo, hi] (arb balls); with ``hessian`` also the
         Hessian of P (dim x dim)."""
@@ -717,8 +868,11 @@ class _TreeModel:
                 point = [self.R_p[j][r] + self.axes[j][r] * slid for r in range(3)]
                 a = [[one if r == col else zero for col in range(3)] for r in range(3)] if parent < 0 \
                     else rotations[parent]
-            else:  # A_rel = exp(q [a]x), a universal joint's exp(q_1 [a_1]x) exp(q_2 [a_2]x)
-                rel = self._turn(self.axes[j], q[c], c, hessian)
+            else:  # A_rel = exp(q [a]x), a universal joint's exp(q_1 [a_1]x) exp(q_2 [a_2]x), a ball's A_ref exp(phi)
+                if self.kinds[j] == "ball":
+                    rel = _mm(self.frames[j], self._rodrigues(q[c: c + 3], lo[c: c + 3], hi[c: c + 3], c, hessian))
+                else:
+                    rel = self._turn(self.axes[j], q[c], c, hessian)
                 if self.kinds[j] == "universal":
                     rel = _mm(rel, self._turn(self.axes_2[j], q[c + 1], c + 1, hessian))
                 point, a = list(self.R_p[j]), rel if parent < 0 else _mm(rotations[parent], rel)
@@ -734,6 +888,10 @@ class _TreeModel:
             for r in range(3):
                 total = total - x_j[r] * self.G[j][r]
         tau = [-(arb(k) * (q[j] - arb(r))) for j, (k, r, _, _) in enumerate(self.springs)]
+        for j, kind in enumerate(self.kinds):  # a ball's: -J_r(phi)^-T K phi (its commanded torque at rest)
+            if kind == "ball":
+                c = self.first[j]
+                tau[c: c + 3] = self._ball_torque(q[c: c + 3], lo[c: c + 3], hi[c: c + 3], c)
         value = total.v if isinstance(total, _Jet) else total
         if not hessian:
             return value, total.g, tau
@@ -748,11 +906,24 @@ class _TreeModel:
         for certain over the box, whether some lie outside for certain, the first body
         and bound not certainly kept) from the bodies' rotations in arb: with A = Rx Ry Rz
         and cos theta_2 > 0, |theta_1| < L iff A_33 > 0 and |A_23| < tan(L) A_33, |theta_2| < L
-        iff |A_13| < sin(L), |theta_3| < L iff A_11 > 0 and |A_12| < tan(L) A_11."""
-        if not np.any(np.isfinite(self.theta_limit)):
+        iff |A_13| < sin(L), |theta_3| < L iff A_11 > 0 and |A_12| < tan(L) A_11. A ball's turn
+        |phi| stays inside its chart (:data:`BALL_CHART`) and the angle of its A_rel inside its
+        range where that is an admissible region: angle < r iff trace A_rel > 1 + 2 cos r."""
+        balls = "ball" in self.kinds
+        if not np.any(np.isfinite(self.theta_limit)) and not balls:
             return True, False, ""
         arb = self.arb
         rotations, inside, outside, text = [], True, False, ""
+        for j, kind in enumerate(self.kinds):
+            if kind != "ball":
+                continue
+            c = self.first[j]
+            size = self._size(lo[c: c + 3], hi[c: c + 3])
+            if not size < arb(BALL_CHART ** 2) and inside:
+                inside = False
+                text = (f"the turn |phi| of {self.joint_names[c]} from its reference may reach {BALL_CHART:.4g} rad "
+                        "(the chart of its rotation vector)")
+            outside = outside or bool(size > arb(BALL_CHART ** 2))
 
         def turn(axis, lo_c, hi_c):
             x = _ball(arb, lo_c, hi_c)
@@ -769,7 +940,18 @@ class _TreeModel:
                 rotations.append([[arb(1) if r == col else arb(0) for col in range(3)] for r in range(3)]
                                  if parent < 0 else rotations[parent])
                 continue
-            rel = turn(self.axes[j], lo[c], hi[c])
+            if self.kinds[j] == "ball":
+                phi = [_ball(arb, lo[c + k], hi[c + k]) for k in range(3)]
+                rel = _mm(self.frames[j], _rodrigues_values(arb, phi, self._size(lo[c: c + 3], hi[c: c + 3])))
+                if self.cones[j] is not None:
+                    trace, least = rel[0][0] + rel[1][1] + rel[2][2], arb(1) + 2 * arb(self.cones[j]).cos()
+                    if not trace > least and inside:
+                        inside = False
+                        text = (f"the turn of {self.joint_names[c]} may reach its range {self.cones[j]:g} rad "
+                                f"(joints.{self.joint_names[c]}.range, an admissible region)")
+                    outside = outside or bool(trace < least)
+            else:
+                rel = turn(self.axes[j], lo[c], hi[c])
             if self.kinds[j] == "universal":
                 rel = _mm(rel, turn(self.axes_2[j], lo[c + 1], hi[c + 1]))
             a = rel if parent < 0 else _mm(rotations[parent], rel)
@@ -1034,17 +1216,29 @@ def potential(config, theta: np.ndarray) -> float:
 def _model(config, arb):
     """(the interval kernel of ``config``'s tree, its equilibrium (the tree's rest state,
     :func:`rbstab.analysis.linearise.linearise_chain`, with the tree's h): one body's
-    :class:`_Model` and Theta_e (3,) [rad], or a tree of hinges, slides and universal
-    joints' :class:`_TreeModel` and each coordinate q at rest (dim,) [rad; a slide's m])."""
+    :class:`_Model` and Theta_e (3,) [rad], or a tree of hinges, slides, universal joints
+    and balls' :class:`_TreeModel` and each coordinate q at rest (dim,) [rad; a slide's m; a
+    ball's rotation vector of its turn from its reference])."""
     from ..variants import chain as C  # heavy: numba
-    from .linearise import linearise_chain, undisturbed  # heavy: numba
+    from .linearise import ball_entries, linearise_chain, undisturbed  # heavy: numba
 
     compiled = C.compile_chain(undisturbed(config).chain)
     lin, _ = linearise_chain(compiled)
     if compiled.hinged:
         from ..variants.tree import tree_layout  # heavy: numba
 
+        from scipy.spatial.transform import Rotation  # heavy: scipy
+
         model = _TreeModel(compiled, arb)
-        r_at = tree_layout(compiled).r_at
-        return model, np.asarray(lin.equilibrium)[[int(r_at[j]) + k for j, k in model.joint_of]]
+        r_at, rest = tree_layout(compiled).r_at, np.asarray(lin.equilibrium, dtype=float)
+        z_index, r_index, balls = ball_entries(compiled)
+        at = dict(zip(r_index.tolist(), z_index.tolist())) | {r: z for z, r in balls}  # reduced entry -> z's
+        equilibrium = rest[[at[int(r_at[j])] + k for j, k in model.joint_of]]
+        for j, kind in enumerate(model.kinds):  # a ball's rotation vector of A_rel as its turn from its reference
+            if kind == "ball":
+                c = model.first[j]
+                turn = (Rotation.from_rotvec(np.array(compiled.params[j]["theta_ref"], dtype=float)).inv()
+                        * Rotation.from_rotvec(equilibrium[c: c + 3]))
+                equilibrium[c: c + 3] = turn.as_rotvec()
+        return model, equilibrium
     return _Model(compiled.params[0], compiled.ppoints[0], compiled.offset, arb), np.asarray(lin.equilibrium[:3])

@@ -1346,6 +1346,8 @@ class _ChainJoint(_Section):
         springs += [] if passive is None else [("passive.theta_ref", passive.theta_ref, passive.k_r)]
         for key, value, stiffness in springs:  # a spring's rest angle (0 where not written) inside the range
             value = np.asarray(0.0 if value is None else value, dtype=float)
+            if self.variant == "ball":  # its cone bounds the turn's angle |Theta_ref|
+                value = np.linalg.norm(value)
             if (bounds is not None and np.any(np.asarray(stiffness or 0.0) != 0)
                     and not np.all((bounds[0] <= value) & (value <= bounds[1]))):
                 raise PydanticCustomError("rbstab_invalid", "a reference beyond the range", {
