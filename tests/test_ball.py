@@ -174,6 +174,8 @@ def test_a_balls_cone_as_a_stop_keeps_the_energy_and_as_a_region_is_a_fall():
     data["joints"][0]["range"] = {"lower": 0.0, "upper": 0.3, "kind": "region"}
     fell = simulate(config_from_mapping(data))
     assert fell.status == "failed" and "the turn of joint j0" in fell.message and "0.3 rad" in fell.message
+    data["joints"][0]["theta_ref"] = [0.2, -0.2, 0.0]  # a reference inside the cone (its turn 0.28 rad), an entry < 0
+    assert config_from_mapping(data).chain.joints[0].theta_ref[1] == -0.2
 
 
 @pytest.mark.parametrize("change, key, expected", [
@@ -184,6 +186,8 @@ def test_a_balls_cone_as_a_stop_keeps_the_energy_and_as_a_region_is_a_fall():
     (lambda d: d["joints"][0].update(k_r=3.0), "joints.j0.k_r", "3 numbers"),
     (lambda d: d["joints"][0].update(axis=[1, 0, 0]), "joints.j0.axis", "no axis"),
     (lambda d: d["joints"][0].update(theta_ref=[0.1, 0.2]), "joints.j0.theta_ref", "3 numbers"),
+    (lambda d: d["joints"][0].update(theta_ref=[0.3, -0.3, 0.0], range={"lower": 0.0, "upper": 0.4, "k_r": 10.0}),
+     "joints.j0.theta_ref", "the spring would be relaxed where the stop pushes back"),  # its turn 0.42 rad > 0.4
 ])
 def test_a_balls_bad_input_is_refused_in_one_line_naming_its_key(change, key, expected):
     data = _balls([3.0, 2.0], [0.1, 0.05], [[0.0] * 3] * 2, [[0.0] * 3] * 2)
