@@ -573,8 +573,8 @@ def test_rbstab_analyze_pushes_a_chains_body_across_a_spec(tmp_path):
     for args, says in (([], "--push-body: found none for"), (["--push-body", "arms"], "found 'arms' for"),
                        (["--push-body", "trunk", "--verify"], "the proof covers one body held to the ground by a "
                                                               "permanent joint, the reduced 6-state model of 'permanent' "
-                                                              "(eq 21), or a tree of hinges, slides and universal "
-                                                              "joints of at most 6 states; this chain "
+                                                              "(eq 21), or a tree of hinges, slides, universal "
+                                                              "joints and balls of at most 6 states; this chain "
                                                               "has 2 bodies")):
         refused = CliRunner().invoke(cli, ["analyze", str(spec), *push, *args, "-o", str(refused_dir)])
         assert refused.exit_code != 0 and says in refused.output and "Traceback" not in refused.output
