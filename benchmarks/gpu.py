@@ -451,7 +451,7 @@ def chain_correctness(n: int) -> str:
     """The GPU's chain runs against the CPU driver's: statuses, steps, final states, and the
     figures streamed on the GPU (no sample back) against the CPU's from its samples (the
     largest difference of v(0), v(t_end), max dv/dt and the rate check's mismatch, relative
-    to max |v(0)|)."""
+    to max |v(0)|; of cop_excursion, relative to its largest)."""
     from rbstab.engine.cuda import integrate_chain_runs_cuda
     from rbstab.engine.integrate import integrate_chain_runs
     from rbstab.simulator import _trees_outputs
@@ -473,9 +473,12 @@ def chain_correctness(n: int) -> str:
     scale = np.max(np.abs(table["lyapunov_initial"]))
     worst = max(float(np.nanmax(np.abs(streamed[k] - table[k]))) for k in
                 ("lyapunov_initial", "lyapunov_final", "max_lyapunov_rate", "lyapunov_rate_mismatch")) / scale
+    pressure = float(np.nanmax(np.abs(streamed["cop_excursion"] - table["cop_excursion"]))
+                     / np.nanmax(np.abs(table["cop_excursion"])))
     return (f"statuses equal {int(np.sum(gpu.status == cpu.status))}/{n}; steps equal {int(np.sum(steps == 0))}/{n} "
             f"(max {int(steps.max())} apart); final states rel. diff median {np.median(rel):.2g}, max {rel.max():.2g}; "
-            f"streamed summaries against the CPU's: largest difference {worst:.2g} of max |v(0)|")
+            f"streamed summaries against the CPU's: largest difference {worst:.2g} of max |v(0)|, of the centre of "
+            f"pressure's excursion {pressure:.2g} of its largest")
 
 
 #: The stub of ``--host-only``: every launch of the CUDA engine returns its runs finished
