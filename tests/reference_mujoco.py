@@ -64,17 +64,20 @@ def _coordinates(j) -> list[dict]:
 
 
 def hinge_tree(config, timestep: float):
-    """(model, data, qpos0, qvel0) of a chain ``config`` whose joints are all hinges, slides or
-    universal joints, built from its resolved sections alone: each body's frame at its
+    """(model, data, qpos0, qvel0) of a chain ``config`` whose joints are all hinges, slides,
+    universal joints or balls, built from its resolved sections alone: each body's frame at its
     joint's point, unrotated (q = 0 is rbstab's), its centre of mass at -child_point with
     the full inertia; each hinge's ``axis`` (a universal joint's: two hinges in its body, in
     order, as MuJoCo composes them), its passive torque as the joint's ``stiffness``,
     ``damping`` and ``springref``, its feedback as a ``position`` servo (kp = k_r, kv = l_r,
     the target theta_ref set in ``data.ctrl``) whose force is clamped to [torque_n_lower,
-    torque_n] where it has limits; gravity as the config's; MuJoCo's RK4 at ``timestep``
+    torque_n] where it has limits; a ball's isotropic k_r and l_r as its ``stiffness`` and
+    ``damping`` (MuJoCo's ball spring about the reference pose: a ball with a reference, a
+    passive torque or limits is refused); gravity as the config's; MuJoCo's RK4 at ``timestep``
     [s]. A ``range`` is left out (MuJoCo's limit is a constraint of its own solver, not
     rbstab's stop): a run compared with it stays inside its ranges. qpos0, qvel0: the
-    initial q, u of each coordinate (0 where not written)."""
+    initial q, u of each coordinate (0 where not written; a ball at its reference pose, at
+    rest)."""
     data = config.resolved
     bodies = {b["name"]: b for b in data["bodies"]}
     joints = {j["child"]: j for j in data["joints"]}
@@ -87,22 +90,28 @@ def hinge_tree(config, timestep: float):
 
     def body(name):
         j, b = joints[name], bodies[name]
-        assert j["variant"] in ("hinge", "universal", "slide"), j["variant"]
+        assert j["variant"] in ("hinge", "universal", "slide", "ball"), j["variant"]
         pos = np.asarray(j["parent_point"], dtype=float)
         if j["parent"] != "ground":  # the parent's frame sits at its own joint's point
             pos = pos - np.asarray(joints[j["parent"]]["child_point"], dtype=float)
         inertia = np.asarray(b["inertia"], dtype=float)
         inertia = np.diag(inertia) if inertia.ndim == 1 else inertia
         inner = "".join(body(c) for c in children.get(name, ()))
-        hinges = "".join(f'<joint name="{c["name"]}" type="{c["type"]}" axis="{vec(c["axis"])}" '
-                         f'stiffness="{c["stiffness"]}" '
-                         f'damping="{c["damping"]}" springref="{c["springref"]}"/>' for c in _coordinates(j))
+        if j["variant"] == "ball":  # its isotropic spring (MuJoCo's ball spring about the reference pose) and damper
+            k, l = (float(np.ravel(j[key])[0]) for key in ("k_r", "l_r"))
+            assert np.allclose(np.diag(np.ravel(j["k_r"])) if np.size(j["k_r"]) == 3 else j["k_r"], k * np.eye(3))
+            assert not np.any(j.get("theta_ref") or 0.0) and not j.get("passive") and not j.get("saturation")
+            hinges = f'<joint name="{j["name"]}" type="ball" stiffness="{k}" damping="{l}"/>'
+        else:
+            hinges = "".join(f'<joint name="{c["name"]}" type="{c["type"]}" axis="{vec(c["axis"])}" '
+                             f'stiffness="{c["stiffness"]}" '
+                             f'damping="{c["damping"]}" springref="{c["springref"]}"/>' for c in _coordinates(j))
         return (f'<body name="{name}" pos="{vec(pos)}">{hinges}'
                 f'<inertial pos="{vec(np.negative(j["child_point"]))}" mass="{b["mass"]}" '
                 f'fullinertia="{vec([inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]])}"/>'
                 f"{inner}</body>")
 
-    coordinates = [(j, c) for j in data["joints"] for c in _coordinates(j)]
+    coordinates = [(j, c) for j in data["joints"] if j["variant"] != "ball" for c in _coordinates(j)]
     actuators = ""
     for _, c in coordinates:
         clamp = (f' forcelimited="true" forcerange="{c["lower"]} {c["upper"]}"'
@@ -114,12 +123,13 @@ def hinge_tree(config, timestep: float):
     model = mujoco.MjModel.from_xml_string(xml)
     state = mujoco.MjData(model)
     state.ctrl[:] = [c["target"] for _, c in coordinates]
-    qpos0, qvel0 = np.zeros(model.nq), np.zeros(model.nv)
+    qpos0, qvel0 = model.qpos0.copy(), np.zeros(model.nv)  # a ball at its reference pose, at rest
     for j, c in coordinates:
         written = data["initial_state"].get(j["child"]) or {}
-        at = model.joint(c["name"]).qposadr[0]
-        qpos0[at], qvel0[at] = (np.ravel(written.get(key, 0.0))[c["index"] if np.size(written.get(key, 0.0)) > 1 else 0]
-                                for key in ("q", "u"))
+        joint = model.joint(c["name"])
+        qpos0[joint.qposadr[0]], qvel0[joint.dofadr[0]] = (
+            np.ravel(written.get(key, 0.0))[c["index"] if np.size(written.get(key, 0.0)) > 1 else 0]
+            for key in ("q", "u"))
     return model, state, qpos0, qvel0
 
 

@@ -602,10 +602,11 @@ def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, st
     _, first, index = np.unique(tree_of, return_index=True, return_inverse=True)
     outputs = C.evaluate([compiled[i] for i in first], time, states, work, tree_of=index, full=full)
     structure = compiled[0]
-    grounded = bool(np.any(structure.permanent & (structure.parents < 0)) and np.any(structure.chain.gravity))
+    held = bool(np.any(structure.permanent & (structure.parents < 0)))  # a point-fixed joint to the ground
+    grounded = held and bool(np.any(structure.chain.gravity))
     pressure = traces and full and tree  # the centres of pressure as outputs
     trees = [compiled[i] for i in first]
-    if (traces and full and structure.hinged) or (grounded and pressure):
+    if (traces and full and structure.hinged) or (held and pressure):
         _reactions(structure, trees, index, time, states, outputs)
     elif grounded and summary and "net_centre_of_pressure" not in outputs:  # at the samples its figure reads
         stride = summary_stride(len(time))
