@@ -434,3 +434,34 @@ def test_a_tree_with_a_ball_above_six_states_is_refused_in_one_line():
                            "l_r": 1.0})
     with pytest.raises(NotVerifiable, match="this tree has 8 states; --verify covers at most 6"):
         verify_sublevel(config_from_mapping(data))
+
+
+@pytest.mark.parametrize("kind", ["universal", "ball", "slide"])
+def test_rbstab_analyze_verify_writes_each_coordinates_box_row(kind, tmp_path):
+    """``rbstab analyze --verify`` of one rod on a universal joint, a ball, and of a block on
+    a slide writes its analysis file with a row of the verified box for each coordinate,
+    named (``<joint>.q_1``, ``<joint>.phi_1``, the slide's joint), the slide's in m."""
+    import xarray as xr
+    import yaml
+    from click.testing import CliRunner
+
+    from rbstab_cli.main import cli
+
+    if kind == "slide":
+        data, names = _block(), ["rail"]
+    elif kind == "ball":
+        data, names = _ball_rod(), ["ankle.phi_1", "ankle.phi_2", "ankle.phi_3"]
+    else:
+        data, names = _rod(), ["ankle.q_1", "ankle.q_2"]
+        data["joints"][0].update(variant="universal", axis=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], k_r=[60.0, 60.0],
+                                 l_r=[8.0, 8.0])
+        data["initial_state"]["rod"] = {"q": [0.0, 0.0]}
+    path = tmp_path / "model.yaml"
+    path.write_text(yaml.safe_dump(data))
+    result = CliRunner().invoke(cli, ["analyze", str(path), "--verify", "--no-certificate", "-o", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    with xr.open_dataset(tmp_path / f"{data['name']}.analysis.nc", engine="h5netcdf") as ds:
+        box = ds["sublevel_verified_box"]
+        assert list(ds["hinge"].values) == names and box.shape == (len(names), 2)
+        assert np.all(box.values[:, 0] <= box.values[:, 1]) and float(ds["sublevel_verified"]) > 0
+        assert box.attrs.get("units") == (None if kind == "slide" else "rad")

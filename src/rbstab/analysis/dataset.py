@@ -29,7 +29,7 @@ Layout of ``<name>.analysis.nc`` (``kind = "configuration"``)::
     worst_state_<block>(axis), sublevel, sublevel_sampled, boundary_level, ... (scalars),
     sublevel_history, sublevel_history_samples (sublevel_step)
     verification (--verify): sublevel_verified, sublevel_verified_boxes, sublevel_verified_seconds
-    (scalars), sublevel_verified_box (axis, bound; a tree of hinges': (hinge, bound), each hinge's q)
+    (scalars), sublevel_verified_box (axis, bound; a tree's: (hinge, bound), each joint coordinate's)
     basin: basin_outcome (flag_values 0 1 2: converged, not converged, failed),
     basin_time_to_converge, basin_lyapunov_initial, basin_lyapunov_final (basin_x, basin_y)
     push: push_direction(push_direction, axis), push_threshold, push_recovering,
@@ -235,9 +235,17 @@ def _verification_variables(analysis) -> dict:
         "sublevel_verified_box": _var(("axis", "bound"), np.asarray(w.box, dtype=float), "rad",
                                       "the Theta box that stops c from being larger [low, high]")
         if w.coordinates == "theta" else
-        _var(("hinge", "bound"), np.asarray(w.box, dtype=float), "rad",
-             "the box of the hinges' angles q (in the joints' order) that stops c from being larger [low, high]"),
+        _var(("hinge", "bound"), np.asarray(w.box, dtype=float), None if any(_slid(analysis, w)) else "rad",
+             "the box of the joints' coordinates (in the joints' order: a hinge's angle [rad], a slide's "
+             "displacement [m], a universal joint's two angles, a ball's rotation vector of its turn) that stops c "
+             "from being larger [low, high]"),
     }
+
+
+def _slid(analysis, w) -> list[bool]:
+    """Whether each coordinate of a tree's verified box (``w.names``) is a slide's [m]."""
+    kinds = {j.name: j.variant for j in analysis.analysed.chain.joints}
+    return [kinds.get(name) == "slide" for name in w.names]
 
 
 def _basin_variables(analysis) -> tuple[dict, dict]:
@@ -401,8 +409,9 @@ def analysis_content(analysis, command_line: str | None = None) -> tuple[dict, d
            if hasattr(layout, "bodies") else {}),
         **({"bound": _var(("bound",), np.array(["low", "high"], dtype=object), "1", "end of an interval")}
            if getattr(analysis, "verification", None) is not None else {}),
-        **({"hinge": _var(("hinge",), np.array(analysis.analysed.chain.joint_names, dtype=object), "1",
-                          "hinge joint whose angle q the verified box bounds")}
+        **({"hinge": _var(("hinge",), np.array(analysis.verification.names, dtype=object), "1",
+                          "the joint coordinate a row of the verified box bounds: a hinge's or a slide's joint, a "
+                          "universal joint's <joint>.q_1, .q_2, a ball's <joint>.phi_1 .. .phi_3")}
            if getattr(getattr(analysis, "verification", None), "coordinates", "theta") == "q" else {}),
         **basin_coords,
         **push_coords,

@@ -106,8 +106,12 @@ class Verification:
     method : str
         ``"interval arithmetic"``.
     coordinates : str
-        What the boxes are of: ``"theta"`` (one body's Euler angles) or ``"q"`` (a tree of
-        hinges: each hinge's angle, in the joints' order; ``box`` then has a row each).
+        What the boxes are of: ``"theta"`` (one body's Euler angles) or ``"q"`` (a tree's
+        joint coordinates in the joints' order; ``box`` then has a row each).
+    names : tuple of str
+        A tree's coordinates, a row of ``box`` each: a hinge's or a slide's joint name, a
+        universal joint's ``<joint>.q_1``, ``.q_2``, a ball's ``<joint>.phi_1`` .. ``.phi_3``
+        (empty for ``"theta"``).
     """
 
     level: float
@@ -118,6 +122,7 @@ class Verification:
     equilibrium_box: float = 0.0
     method: str = "interval arithmetic"
     coordinates: str = "theta"
+    names: tuple = ()
 
     @property
     def summary(self) -> str:
@@ -1194,7 +1199,8 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
     else:
         reason = f"box {name} in {_fmt_box(bad_box)}: {reason}"
     return Verification(level=float(result_level), boxes=counter, seconds=_time.perf_counter() - t0,
-                        reason=reason, box=bad_box, equilibrium_box=radius, coordinates=name)
+                        reason=reason, box=bad_box, equilibrium_box=radius, coordinates=name,
+                        names=tuple(getattr(model, "names", ())))
 
 
 def _fmt_box(box: np.ndarray) -> str:
