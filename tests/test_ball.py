@@ -196,3 +196,29 @@ def test_a_balls_bad_input_is_refused_in_one_line_naming_its_key(change, key, ex
         config_from_mapping(data)
     message = str(raised.value).replace("joints.0.", "joints.j0.")
     assert key in message and expected in message, message
+
+
+def test_a_balls_basin_stability_draws_its_relative_angular_velocity():
+    """A ball's child takes ``initial_state.<body>.omega.<i>`` as a basin axis or a basin
+    stability range: Omega_j (relative to its parent, child frame) set in the reduced state;
+    each drawn run's initial Omega_j is the draw (joint_omega at t = 0); its Euler angles
+    are refused in one line naming the keys allowed."""
+    from rbstab.analysis.runs import Runs
+
+    data = _balls([3.0, 2.0], [0.3, 0.2], [[0.0] * 3] * 2, [[0.0] * 3] * 2)
+    config = config_from_mapping(data)
+    analysis = analyze(config, certificate=False, simulate=False,
+                       basin_stability={"ranges": ["initial_state.b1.omega.0=-2:2", "initial_state.b0.omega.2=-1:1"],
+                                        "draws": 8})
+    assert analysis.basin_stability is not None and len(analysis.basin_stability.values) == 8
+    from rbstab.analysis.basin import BasinAxis
+
+    axes = [BasinAxis.parse("initial_state.b1.omega.0=-2:2:3"), BasinAxis.parse("initial_state.b0.omega.2=-1:1:3")]
+    states = Runs(config).states(axes, np.array([[1.5, -0.5]]))
+    start = dict(data, initial_state={"b0": {"theta": states[0, :3].tolist(), "omega": states[0, 3:6].tolist()},
+                                      "b1": {"theta": states[0, 12:15].tolist(), "omega": states[0, 15:18].tolist()}})
+    result = simulate(config_from_mapping(start))
+    np.testing.assert_allclose(result.outputs["joint_omega"][0, :, :], [[0.0, 0.0, -0.5], [1.5, 0.0, 0.0]], atol=1e-12)
+    with pytest.raises(ValueError, match=r"initial_state.<b0\|b1>.omega.<0\|1\|2>"):
+        analyze(config, certificate=False, simulate=False,
+                basin_stability={"ranges": ["initial_state.b1.theta.0=-1:1"], "draws": 4})

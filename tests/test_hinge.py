@@ -522,7 +522,7 @@ def test_a_hinge_trees_analysis_says_what_it_leaves_out():
     with pytest.raises(ValueError, match=r"initial_state.<b0\|b1\|b2>.<q\|u>"):
         analyze(hinges, certificate=False, simulate=False,
                 basin_stability={"ranges": ["initial_state.b0.omega.0=-1:1"], "draws": 4})
-    with pytest.raises(ValueError, match="maps its basin over its hinges' angles and rates"):
+    with pytest.raises(ValueError, match="maps its basin over its hinges', slides' and universal joints' q and u"):
         analyze(hinges, certificate=False, simulate=False,
                 basin=["initial_state.b0.theta.0=-0.1:0.1:3", "initial_state.b1.q=-0.1:0.1:3"])
 

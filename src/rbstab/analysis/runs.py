@@ -445,20 +445,26 @@ _BODY_OFFSET = {block: 3 * k for k, block in enumerate(_BODY_BLOCKS)}
 
 def _reduced_offset(compiled, axis) -> int:
     """The index in a tree's reduced state (:func:`rbstab.variants.tree.tree_layout`) of a
-    hinge's child's q or u (a universal joint's child's q_i or u_i, entry i of the key) that
-    ``axis`` names; ValueError naming what is allowed where the body is not such a child,
-    or where ``axis`` names another entry of a tree with a hinge."""
+    hinge's or a slide's child's q or u (a universal joint's child's q_i or u_i, entry i of
+    the key), or of a quaternion ball's child's Omega_j entry i (``omega.<i>``: its angular
+    velocity relative to its parent, child frame), that ``axis`` names; ValueError naming
+    what is allowed where the body is not such a child, or where ``axis`` names another
+    entry of a tree with such joints."""
     from ..variants.tree import tree_layout  # heavy: numba
 
     names = list(compiled.chain.body_names)
     hinged = [b for b, code in zip(names, compiled.codes) if AXES[code] > 0]
-    allowed = f"initial_state.<{'|'.join(hinged)}>.<q|u>"
+    balls = [b for b, joint in zip(names, compiled.chain.joints) if joint.variant == "ball"]
+    allowed = ", ".join(([f"initial_state.<{'|'.join(hinged)}>.<q|u>"] if hinged else [])
+                        + ([f"initial_state.<{'|'.join(balls)}>.omega.<0|1|2>"] if balls else []))
+    if axis.block == "omega" and axis.body in balls and axis.index is not None:
+        return int(tree_layout(compiled).r_at[names.index(axis.body)]) + 4 + axis.index
     if axis.block not in ("q", "u"):
-        raise ValueError(f"--basin {axis.key!r}: a tree with a hinge maps its basin over its hinges' angles and rates "
-                         f"(and its universal joints'; {allowed})")
+        raise ValueError(f"--basin {axis.key!r}: a tree of joints on coordinates maps its basin over its hinges', "
+                         f"slides' and universal joints' q and u and its balls' Omega_j ({allowed})")
     if axis.body not in hinged:
-        raise ValueError(f"--basin {axis.key!r}: '{axis.body}' is not a hinge's or a universal joint's child (those: "
-                         f"{', '.join(hinged)}; keys {allowed})")
+        raise ValueError(f"--basin {axis.key!r}: '{axis.body}' is not a hinge's, a slide's or a universal joint's "
+                         f"child (keys {allowed})")
     i = names.index(axis.body)
     m = int(AXES[compiled.codes[i]])
     index = axis.index or 0
