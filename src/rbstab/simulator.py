@@ -633,9 +633,9 @@ def _ground_wrenches(structure, trees: Sequence, tree_of: np.ndarray, time: np.n
     shape) at every ``stride``-th of their samples ``states`` (k, m, n_states) at ``time``
     (m,), with their joints' angles and rates (``outputs``' ``joint_theta``,
     ``joint_omega``): at those m' samples, Lambda_j [N] (k, m', n, 3; NaN for the joints that
-    are not point-fixed), the ground's moment about each joint to the ground's point [N m]
-    (k, m', n, 3; NaN for the others) and the net centre of pressure [m] (k, m', 3;
-    :func:`rbstab.summary.ground_pressure`), inertial frame."""
+    are not point-fixed), each joint to the ground's centre of pressure [m] (k, m', n, 3; NaN
+    for the others) and their net centre of pressure [m] (k, m', 3;
+    :func:`rbstab.summary.pressure_samples`), inertial frame."""
     from .variants import chain as C  # heavy: numba
     from .variants.tree import reaction_samples, tree_layout  # heavy: numba
 
@@ -649,10 +649,9 @@ def _ground_wrenches(structure, trees: Sequence, tree_of: np.ndarray, time: np.n
     reaction_samples(np.tile(time, k), np.ascontiguousarray(states.reshape(k * m, -1)), *angles, params,
                      structure.codes, structure.parents, ppoints, structure.d_at, *tree_layout(structure).args,
                      sample_tree, reactions, moments)
-    net = np.empty((k * m, 3))
-    pressure_samples(reactions, moments, ppoints, structure.codes, structure.parents, params, sample_tree, net)
-    return (reactions.transpose(2, 0, 1).reshape(k, m, n, 3), moments.transpose(2, 0, 1).reshape(k, m, n, 3),
-            net.reshape(k, m, 3))
+    net, each = np.empty((k * m, 3)), np.empty((k * m, n, 3))
+    pressure_samples(reactions, moments, ppoints, structure.codes, structure.parents, params, sample_tree, net, each)
+    return reactions.transpose(2, 0, 1).reshape(k, m, n, 3), each.reshape(k, m, n, 3), net.reshape(k, m, 3)
 
 
 def _reactions(structure, trees: Sequence, tree_of: np.ndarray, time: np.ndarray, states: np.ndarray,
@@ -661,31 +660,15 @@ def _reactions(structure, trees: Sequence, tree_of: np.ndarray, time: np.ndarray
     of the point-fixed joints where :func:`rbstab.variants.chain.evaluate` leaves them NaN
     (a tree with a hinge) into ``outputs["constraint_force"]`` (k, m, n, 3), each joint to
     the ground's centre of pressure into ``outputs["centre_of_pressure"]`` (k, m, n, 3; NaN
-    for the other joints): on the ground plane through the origin perpendicular to g, the
-    point P = C - (Lambda h - n x M) / (n . Lambda) (n the upward normal, h = n . C the
-    height of the joint's point C, M the ground's moment about C), NaN where
-    n . Lambda <= 0 or g = 0; their net centre of pressure into
-    ``outputs["net_centre_of_pressure"]`` (k, m, 3) unless it holds one (the paper's one
-    body's, :func:`rbstab.variants.kernels.body_pressure`: the GPU's)."""
-    force, moment, net = _ground_wrenches(structure, trees, tree_of, time, states, outputs)
+    for the other joints, without gravity and where the ground does not push up), their
+    net centre of pressure into ``outputs["net_centre_of_pressure"]`` (k, m, 3) unless it
+    holds one (the paper's one body's, :func:`rbstab.variants.kernels.body_pressure`: the GPU's)."""
+    force, each, net = _ground_wrenches(structure, trees, tree_of, time, states, outputs)
     outputs.setdefault("net_centre_of_pressure", net)
     if structure.hinged:
         fixed = structure.permanent
         outputs["constraint_force"][:, :, fixed] = force[:, :, fixed]
-    gravity = np.asarray(structure.chain.gravity, dtype=float)
-    k, m, n = force.shape[:3]
-    cop = np.full((k, m, n, 3), np.nan)
-    if np.any(gravity):
-        up = -gravity / np.linalg.norm(gravity)
-        ppoints = np.stack([t.ppoints for t in trees])
-        point = ppoints[np.asarray(tree_of)][:, None]  # (k, 1, n, 3): each joint's point C (the ground's R_p)
-        height = point @ up
-        normal = force @ up
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cop = point - (force * height[..., None] - np.cross(up, moment)) / normal[..., None]
-        cop[~(normal > 0)] = np.nan
-        cop[:, :, ~(structure.permanent & (structure.parents < 0))] = np.nan
-    outputs["centre_of_pressure"] = cop
+    outputs["centre_of_pressure"] = each
 
 
 def _groups(batch: RunBatch, rows: np.ndarray) -> list[np.ndarray]:

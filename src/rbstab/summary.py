@@ -808,15 +808,25 @@ def _settle_rows(error, omega, e_bound, omega_bound, acc):
 
 
 @jit(nogil=True)
-def pressure_samples(forces, moments, ppoints, codes, parents, params, tree_of, out):
+def pressure_samples(forces, moments, ppoints, codes, parents, params, tree_of, out, joints):
     """:func:`ground_pressure` at every sample s: ``forces``, ``moments`` (n, 3, S) the
     joints' Lambda_j [N] and the ground's moments [N m] (inertial;
     :func:`rbstab.variants.tree.reaction_samples`), sample s of the tree ``tree_of[s]``
-    (``ppoints`` (t, n, 3), ``params`` (t, n)); into ``out`` (S, 3) [m]."""
+    (``ppoints`` (t, n, 3), ``params`` (t, n)); into ``out`` (S, 3) [m]; into ``joints``
+    (S, n, 3) [m] each point-fixed joint to the ground's own centre of pressure
+    (:func:`rbstab.model.pressure_point` of its wrench alone), NaN for the other joints."""
     for s in range(out.shape[0]):
         t = tree_of[s]
         out[s, 0], out[s, 1], out[s, 2] = ground_pressure(forces[:, :, s], moments[:, :, s], ppoints[t], codes,
                                                           parents, params[t])
+        weight = total_weight(params[t])
+        for j in range(codes.shape[0]):
+            joints[s, j, 0], joints[s, j, 1], joints[s, j, 2] = math.nan, math.nan, math.nan
+            if parents[j] < 0 and POINT_FIXED[codes[j]]:
+                f, m, c = forces[j, :, s], moments[j, :, s], ppoints[t, j]
+                joints[s, j, 0], joints[s, j, 1], joints[s, j, 2] = pressure_point(
+                    (f[0], f[1], f[2]), (m[0] + c[1] * f[2] - c[2] * f[1], m[1] + c[2] * f[0] - c[0] * f[2],
+                                         m[2] + c[0] * f[1] - c[1] * f[0]), weight)
 
 
 @jit(nogil=True)

@@ -95,7 +95,8 @@ def _warm_up_chains() -> None:
                      compiled.ppoints[None], compiled.d_at, *tree_layout(compiled).args, np.zeros(1, np.int64),
                      reactions, reactions.copy())
     pressure_samples(reactions, reactions.copy(), np.stack([compiled.ppoints]), compiled.codes, compiled.parents,
-                     C.records_of([compiled]), np.zeros(1, np.int64), np.empty((1, 3)))  # their centre of pressure
+                     C.records_of([compiled]), np.zeros(1, np.int64), np.empty((1, 3)),
+                     np.empty((1, compiled.size, 3)))  # their centres of pressure
     _warm_up_states(compiled, y[None])
 
 
