@@ -231,9 +231,10 @@ class Variant:
         return self._equilibrium[1]
 
 
-#: Newton's iterations of :func:`rest_equilibria` (each halving its step at most 30 times) and
-#: the residual [rad/s^2, m/s^2, m/s] at which it stops: the root polish's of one variant.
-_NEWTON_STEPS, _NEWTON_RESIDUAL = 60, 1e-13
+#: Newton's iterations of :func:`rest_equilibria` (each halving its step at most 30 times),
+#: the residual [rad/s^2, m/s^2, m/s] at which it stops (the root polish's of one variant) and
+#: the relative size of a step that round-off stops.
+_NEWTON_STEPS, _NEWTON_RESIDUAL, _NEWTON_STEP = 60, 1e-13, 1e-12
 
 
 def rest_equilibria(cls: type[Variant], records: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -243,7 +244,8 @@ def rest_equilibria(cls: type[Variant], records: np.ndarray) -> tuple[np.ndarray
     no limit moves), all at once; each row's numbers are those of the record alone (no
     row's arithmetic reads another's). From the
     configuration 0, Newton's method on the rest accelerations (their Jacobian by central
-    differences, the step halved until their norm falls) to 1e-13; ``found`` where it
+    differences, the step halved until their norm falls) to 1e-13, or until Newton's step
+    falls below 1e-12 (1 + |p|) (what remains is round-off); ``found`` where it
     converged to the minimum of the stored energy downhill from 0 (v no higher than at 0,
     the linearisation there stable: -dF/dp's eigenvalues real and positive), or where 0 is
     already a rest point (as a descent from it stops there); elsewhere h is NaN (and
@@ -285,8 +287,9 @@ def rest_equilibria(cls: type[Variant], records: np.ndarray) -> tuple[np.ndarray
     f = acceleration(p, np.arange(k))
     at_zero = np.linalg.norm(f, axis=1) == 0.0
     stuck = np.zeros(k, dtype=bool)  # a singular Jacobian: left to the caller
+    floor = np.zeros(k, dtype=bool)  # Newton's step below 1e-12 (1 + |p|): the residual is round-off's
     for _ in range(_NEWTON_STEPS):
-        rows = np.flatnonzero((np.linalg.norm(f, axis=1) > _NEWTON_RESIDUAL) & ~stuck)
+        rows = np.flatnonzero((np.linalg.norm(f, axis=1) > _NEWTON_RESIDUAL) & ~stuck & ~floor)
         if not len(rows):
             break
         jac = jacobian(p[rows], rows)
@@ -305,9 +308,10 @@ def rest_equilibria(cls: type[Variant], records: np.ndarray) -> tuple[np.ndarray
             if not worse.any():
                 break
             size = np.where(worse, 0.5 * size, size)
+        floor[rows] = np.linalg.norm(step, axis=1) <= _NEWTON_STEP * (1.0 + np.linalg.norm(p[rows], axis=1))
         p[rows], f[rows] = trial, f_trial
     value = potential(p)
-    found = at_zero | ((np.linalg.norm(f, axis=1) <= _NEWTON_RESIDUAL) & ~stuck)
+    found = at_zero | (((np.linalg.norm(f, axis=1) <= _NEWTON_RESIDUAL) | floor) & ~stuck)
     found &= at_zero | (value <= potential(np.zeros((k, n))) + 1e-12 * np.abs(value))
     rows = np.flatnonzero(found & ~at_zero)
     if len(rows):
