@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import os
 import socket
 import threading
@@ -204,26 +203,6 @@ def silent_server():
 def tree_spelling(config):
     """The one-body config ``config`` written in the tree's spelling (bodies, joints): its
     body ``body`` held to the ground at R by its joint ``controller``."""
-    r = copy.deepcopy(config.resolved)
-    body, controller, state = r.pop("body"), r.pop("controller"), r.pop("initial_state")
-    point = body.pop("attachment_point")
-    r["gravity"] = body.pop("gravity")
-    sat = controller.pop("saturation", None)
-    tree_body = {"name": "body", **body, "k_t": controller.pop("k_t"), "l_t": controller.pop("l_t")}
-    if controller["variant"] != "sliding":
-        controller.pop("boundary_layer")
-    joint = {"name": "controller", "parent": "ground", "parent_point": point, "child": "body", "child_point": point,
-             **controller}
-    if sat is not None:
-        if sat["force_h"] is not None:
-            tree_body["saturation"] = {"force_h": sat["force_h"], "shape": sat["shape"]}
-        joint["saturation"] = {k: sat[k] for k in ("torque_n", "constraint_force") if sat[k] is not None}
-        joint["saturation"]["shape"] = sat["shape"]
-    if controller["variant"] == "permanent":  # placed on the joint
-        state = {k: state[k] for k in ("theta", "omega")}
-    r.update(bodies=[tree_body], joints=[joint], initial_state={"body": state})
-    for d in r.get("disturbances", []):
-        d["body"] = "body"
-    from rbstab.config.loader import config_from_mapping  # heavy: pydantic, numba
+    from rbstab.config.loader import config_from_mapping, tree_resolved  # heavy: pydantic, numba
 
-    return config_from_mapping(r)
+    return config_from_mapping(tree_resolved(config.resolved))

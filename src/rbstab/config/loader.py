@@ -47,6 +47,7 @@ violates its constraint is an error that says by how much.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import warnings
@@ -91,7 +92,7 @@ from .yaml_io import dump_yaml, dump_yaml_sections, read_yaml_file
 
 __all__ = ["RunConfig", "config_from_mapping", "load_config",
            "PER_RUN_SECTIONS", "limits_of", "simulation_settings", "resolved_simulation", "ONE_BODY_NAMES",
-           "CONSTRAINT_TOLERANCE", "initial_state_fits", "placed_initial_state"]
+           "CONSTRAINT_TOLERANCE", "initial_state_fits", "placed_initial_state", "tree_resolved", "tree_keys"]
 
 #: Top-level sections in which most runs of a sweep differ (:meth:`RunConfig.to_yaml` does
 #: not cache their YAML).
@@ -250,6 +251,59 @@ def _one_body_chain(body: RigidBody, gains: Gains, variant: str) -> Chain:
         boundary_layer=gains.boundary_layer,
         saturation=None if sat is None else Saturation(sat.torque_n, _INF3.copy(), sat.constraint_force, sat.shape))
     return single(tree_body, joint, body.gravity)
+
+
+def tree_resolved(resolved: Mapping) -> dict:
+    """A validated one-body resolved configuration (``body``, ``controller``;
+    :attr:`RunConfig.resolved`) written in a tree's spelling (``bodies``, ``joints``): its
+    one-body tree (:class:`RunConfig`), the body ``body`` with K_t, L_t and the limit of H,
+    held at R to the ground point R by the joint ``controller`` with the law, the other gains
+    and the limits of N and Lambda; a ``permanent`` joint's child's x and v left to be placed.
+    ``config_from_mapping`` of it is the same tree. Not modified."""
+    r = copy.deepcopy(dict(resolved))
+    body, controller, state = r.pop("body"), r.pop("controller"), r.pop("initial_state")
+    point = body.pop("attachment_point")
+    r["gravity"] = body.pop("gravity")
+    sat = controller.pop("saturation", None)
+    tree_body = {"name": ONE_BODY_NAMES[0], **body, **{g: controller.pop(g) for g in ("k_t", "l_t") if g in controller}}
+    if controller["variant"] != "sliding":
+        controller.pop("boundary_layer", None)
+    joint = {"name": ONE_BODY_NAMES[1], "parent": "ground", "parent_point": point, "child": ONE_BODY_NAMES[0],
+             "child_point": point, **controller}
+    if sat is not None:
+        force_h = sat.get("force_h")
+        tree_body["saturation"] = {"force_h": math.inf if force_h is None else force_h, "shape": sat["shape"]}
+        joint["saturation"] = {k: sat[k] for k in ("torque_n", "constraint_force") if sat.get(k) is not None}
+        joint["saturation"]["shape"] = sat["shape"]
+    if point_fixed(controller["variant"]):
+        state = {k: state[k] for k in ("theta", "omega")}
+    r.update(bodies=[tree_body], joints=[joint], initial_state={ONE_BODY_NAMES[0]: state})
+    for d in r.get("disturbances") or ():
+        d["body"] = ONE_BODY_NAMES[0]
+    return r
+
+
+def tree_keys(key: str) -> tuple[str, ...]:
+    """The keys of :func:`tree_resolved`'s mapping that hold the value of a one-body
+    configuration's dotted ``key`` (``body.mass`` -> ``bodies.body.mass``,
+    ``controller.k_t.0`` -> ``bodies.body.k_t.0``, ``body.attachment_point`` -> the joint's
+    ``parent_point`` and ``child_point``, ``initial_state.theta`` ->
+    ``initial_state.body.theta``); other sections' keys as they are."""
+    section, _, rest = key.partition(".")
+    field = rest.partition(".")[0]
+    body, joint = (f"{part}.{name}." for part, name in zip(("bodies", "joints"), ONE_BODY_NAMES))
+    if section == "body":
+        if field == "gravity":
+            return ("gravity" + rest[len(field):],)
+        if field == "attachment_point":
+            return tuple(joint + f"{end}_point" + rest[len(field):] for end in ("parent", "child"))
+        return (body + rest,)
+    if section == "controller":
+        on_body = field in ("k_t", "l_t") or rest.startswith("saturation.force_h")
+        return ((body if on_body else joint) + rest,)
+    if section == "initial_state":
+        return (f"initial_state.{ONE_BODY_NAMES[0]}.{rest}",)
+    return (key,)
 
 
 _BOTH = ("config key 'bodies': found both 'body' and 'bodies'; expected either body and controller (one body) or "

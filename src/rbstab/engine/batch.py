@@ -29,12 +29,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..chain import hinge_vectors
-from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
-from ..config.loader import RunConfig, config_from_mapping, placed_initial_state
+from ..config.loader import config_from_mapping, placed_initial_state, tree_keys, tree_resolved
 from ..config.paths import parse_any_key
-from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS, is_chain
+from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, is_chain
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, set_limits
-from ..variants import VARIANTS
 from ..variants import chain as C
 from ..variants.paper import paper_form, paper_initial_state
 from ..variants.registry import record_offsets
@@ -196,7 +194,7 @@ class TableFields:
             if out is None:
                 out = np.empty((self.n if only is None else len(rows), *value.shape[1:]))
             out[rows if only is None else slice(None)] = value
-        return out
+        return np.zeros((0, *(shape or ()))) if out is None else out  # no runs
 
     def rows(self, t: int) -> np.ndarray:
         """The runs of template ``t``."""
@@ -274,71 +272,26 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
     rbstab.config.ConfigError
         For a tree's template or run the sweep's validation would have refused.
     """
-    if len(templates) and is_chain(templates[0]):
-        return _trees_from_table(templates, keys, columns, template, timeout=timeout)
-    return _bodies_from_table(templates, keys, columns, template, timeout=timeout)
+    one_body = not (len(templates) and is_chain(templates[0]))
+    if one_body:  # its one-body tree's spelling (rbstab.config.RunConfig)
+        templates = [tree_resolved(t) for t in templates]
+        columns = {tree: columns[key] for key in keys for tree in tree_keys(key)}
+        keys = [tree for key in keys for tree in tree_keys(key)]
+    batch = _trees_from_table(templates, keys, columns, template, timeout=timeout, place=not one_body)
+    return _paper_runs(batch) if one_body else batch
 
 
-def _bodies_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
-                       template: np.ndarray, *, timeout: float | None = None) -> RunBatch:
-    """:func:`batch_from_table` of one-body templates: every record at once (vectorised
-    numpy), each template's one-body tree its runs' structure."""
-    f = TableFields(templates, keys, columns, np.asarray(template, dtype=np.int64))
-    n = f.n
-    if n == 0:
-        return RunBatch((), np.zeros(0, np.int64), np.zeros((0, 1), PARAMETERS), np.zeros((0, 1, 3)), np.zeros(0),
-                        np.zeros((0, MAX_STATE)), np.zeros(0, np.int64), np.zeros(0, SETTINGS), np.zeros(0, np.int64),
-                        np.zeros(0, bool), np.zeros(0, bool))
-    names = f.text("controller", "variant")
-    code = f.of_templates([VARIANT_CODES[t["controller"]["variant"]] for t in templates], dtype=np.int64)
-    used = {g: np.isin(names, [v for v, cls in VARIANTS.items() if g in cls.required_gains])
-            for g in (*GAIN_NAMES, "k_s")}
-    p = np.zeros(n, dtype=PARAMETERS)
-    gravity = f.get("body", "gravity")
-    _rigid(p, f.get("body", "mass"), f.get("body", "inertia", shape=(3, 3)), f.get("body", "attachment_point"),
-           gravity)
-    for g in GAIN_NAMES:
-        rows = np.flatnonzero(used[g])
-        if len(rows):
-            p[g][rows] = f.get("controller", g, [0.0, 0.0, 0.0], shape=(3, 3))[rows]
-    rows = np.flatnonzero(used["l_d"])
-    p["l_d_inv"][rows] = _inverse(p["l_d"][rows])
-    sliding = used["k_s"]
-    if sliding.any():
-        p["k_s"][sliding] = f.get("controller", "k_s", 0.0)[sliding]
-        p["boundary_layer"][sliding] = f.get("controller", "boundary_layer", 0.0)[sliding]
-    shapes = f.of_templates([SATURATION_SHAPES[t["controller"]["saturation"].get("shape", "clip")]
-                             if t["controller"].get("saturation") else 0 for t in templates], dtype=float)
-    saturated = np.flatnonzero(shapes > 0)
-    if len(saturated):
-        p["saturation"] = shapes
-        for field, key in (("torque_limit", "torque_n"), ("force_limit", "force_h"),
-                           ("constraint_force_limit", "constraint_force")):
-            p[field][saturated] = f.get("controller", f"saturation.{key}", math.inf, shape=(3,))[saturated]
-        p["torque_floor"][saturated] = -p["torque_limit"][saturated]
-    for t, rows in f.groups:
-        if templates[t].get("disturbances"):
-            part = p[rows]
-            _disturbances(part, f, t, range(len(templates[t]["disturbances"])))
-            p[rows] = part
-    set_limits(p, _bounds(f, templates))
-    trees = tuple(_one_body_tree(t) for t in templates)
-    for t, rows in f.groups:
-        p["lyapunov_offset"][rows] = _tree_offsets(trees[t], p[rows, None], p["attachment_point"][rows, None],
-                                                   gravity[rows])
-    settings = _settings(f, templates, timeout)
-    sign_law = sliding & (p["boundary_layer"] == 0)
-    return RunBatch(trees=trees, tree=f.template.copy(), params=p[:, None],
-                    ppoints=p["attachment_point"][:, None].copy(), offset=p["lyapunov_offset"].copy(),
-                    y0=_initial_states(f, code), n_state=np.asarray(STATE_SIZE, dtype=np.int64)[code],
-                    settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
-                    compiled=(settings["method"] != NOT_COMPILED) & ~sign_law, one_body=np.ones(n, dtype=bool))
-
-
-def _one_body_tree(template: Mapping):
-    """The compiled one-body tree (:attr:`rbstab.config.RunConfig.chain`, h 0: each run's
-    own is in the batch) of a validated one-body resolved configuration."""
-    return C.compile_chain(RunConfig.from_resolved({**template, "name": "template"}).chain, offset=0.0)
+def _paper_runs(batch: RunBatch) -> RunBatch:
+    """``batch`` of one-body trees as the paper's one body runs them: each run's state its
+    variant's (:data:`rbstab.layout.VARIANT_LAYOUTS`: a permanent joint's Theta and Omega),
+    zero-padded to :data:`MAX_STATE`, and h in its record's ``lyapunov_offset`` (written in
+    ``batch.params``)."""
+    n_state = np.asarray(STATE_SIZE, dtype=np.int64)[batch.codes]
+    y0 = np.zeros((len(batch), MAX_STATE))
+    width = min(MAX_STATE, batch.y0.shape[1])
+    y0[:, :width] = np.where(np.arange(width) < n_state[:, None], batch.y0[:, :width], 0.0)
+    batch.params["lyapunov_offset"][:, 0] = batch.offset
+    return dataclasses.replace(batch, y0=y0, n_state=n_state, one_body=np.ones(len(batch), dtype=bool))
 
 
 def _rigid(p: np.ndarray, mass: np.ndarray, inertia: np.ndarray, r: np.ndarray, gravity: np.ndarray) -> None:
@@ -402,21 +355,10 @@ def _bounds(f: TableFields, templates: Sequence[Mapping]) -> np.ndarray | None:
                      for name in LIMITED], axis=1)
 
 
-def _initial_states(f: TableFields, code: np.ndarray) -> np.ndarray:
-    """The runs' initial states, zero-padded to :data:`MAX_STATE` (:attr:`RunBatch.y0`)."""
-    blocks = {block: f.get("initial_state", key, [0.0, 0.0, 0.0]) for key, block in INITIAL_STATE_BLOCKS.items()}
-    y0 = np.zeros((f.n, MAX_STATE))
-    for c, layout in enumerate(VARIANT_LAYOUTS.values()):
-        rows = np.flatnonzero(code == c)
-        if len(rows):
-            y0[rows, : layout.size] = np.concatenate([blocks[b][rows] for b in layout.blocks], axis=1)
-    return y0
-
-
 # -- trees -----------------------------------------------------------------------------------------
 def batch_of(configs: Sequence, timeout: float | None = None) -> RunBatch:
-    """The :class:`RunBatch` of validated configurations (:class:`rbstab.config.RunConfig`,
-    :class:`rbstab.config.RunConfig`; ``timeout`` [s], if given, each run's
+    """The :class:`RunBatch` of validated configurations (:class:`rbstab.config.RunConfig`
+    in either spelling; ``timeout`` [s], if given, each run's
     ``max_wall_time``). Configs that share their Chain object share its compilation (a
     sweep over initial states compiles its chain once); one-body configs that share their
     body and gains objects (:meth:`rbstab.config.RunConfig.from_resolved` with ``like``)
@@ -466,9 +408,9 @@ def batch_of(configs: Sequence, timeout: float | None = None) -> RunBatch:
 
 
 def _trees_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
-                      template: np.ndarray, *, timeout: float | None = None) -> RunBatch:
+                      template: np.ndarray, *, timeout: float | None = None, place: bool = True) -> RunBatch:
     """:func:`batch_from_table` of trees' templates: each template validated once, every
-    run's records built from the columns at once."""
+    run's records built from the columns at once (``place``: :func:`tree_initial_states`')."""
     f = TableFields(templates, keys, columns, np.asarray(template, dtype=np.int64))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the sweep reported each template's warnings when it planned it
@@ -483,16 +425,18 @@ def _trees_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns
     gravity = f.get("gravity", shape=(3,))
     for t, rows in f.groups:
         tree = trees[t]
-        records, points = np.zeros((len(rows), tree.size), dtype=PARAMETERS), np.zeros((len(rows), tree.size, 3))
+        every = len(rows) == n  # one template: its records written in place (2 kB a record)
+        records = params[:, : tree.size] if every else np.zeros((len(rows), tree.size), dtype=PARAMETERS)
+        points = ppoints[:, : tree.size] if every else np.zeros((len(rows), tree.size, 3))
         for i in range(tree.size):
-            p = np.zeros(len(rows), dtype=PARAMETERS)
-            _tree_record(p, f, t, tree.chain, i, gravity[rows])
-            set_limits(p, None if bounds is None else bounds[rows])
-            records[:, i] = p
+            _tree_record(records[:, i], f, t, tree.chain, i, gravity[rows])
+            set_limits(records[:, i], None if bounds is None else bounds[rows])
             points[:, i] = f.get("joints", f"{tree.chain.joint_names[i]}.parent_point", shape=(3,), only=t)
-        params[rows, : tree.size], ppoints[rows, : tree.size] = records, points
+        if not every:
+            params[rows, : tree.size], ppoints[rows, : tree.size] = records, points
         n_state[rows] = tree.n_states
-        y0[rows, : tree.n_states] = tree_initial_states(configs[t], tree, keys, columns, rows, records, points)
+        y0[rows, : tree.n_states] = tree_initial_states(configs[t], tree, keys, columns, rows, records, points,
+                                                        place=place)
         offset[rows] = _tree_offsets(tree, records, points, gravity[rows])
     settings = _settings(f, templates, timeout)
     sign_law = np.zeros(n, dtype=bool)  # a sliding joint without a boundary layer (only the paper's one body has one)
@@ -598,7 +542,7 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
 
 
 def tree_initial_states(config, tree, keys: Sequence[str], columns: Mapping[str, np.ndarray], rows: np.ndarray,
-                        params: np.ndarray, ppoints: np.ndarray) -> np.ndarray:
+                        params: np.ndarray, ppoints: np.ndarray, *, place: bool = True) -> np.ndarray:
     """The maximal initial states (k, n_states: Theta [rad], Omega [rad/s, body frame], X
     [m], V [m/s, inertial frame] of each body, then each embedded joint's D [m]) of the k
     runs ``rows`` of a table of one tree's runs as columns (``config``: their template's, validated; ``tree`` its compiled
@@ -607,7 +551,9 @@ def tree_initial_states(config, tree, keys: Sequence[str], columns: Mapping[str,
     runs' values of the varied ``initial_state.*`` keys (``keys``, their ``columns``) set,
     then the x and v the template leaves out and no key sets placed as the loader places
     them (:func:`rbstab.variants.chain.place`: on the parent's point, parents first), with
-    each run's joint points. The runs are validated: nothing is checked or raised here."""
+    each run's joint points (``place`` False: the template's x and v left as they are, for a
+    state that leaves them out, the paper's pinned body's). The runs are validated: nothing is
+    checked or raised here."""
     names = list(config.chain.body_names)
     varied = [k for k in keys if parse_any_key(k).section == "initial_state"]
     if varied and any(j.variant in ("hinge", "universal") for j in config.chain.joints):  # q turns what it carries
@@ -633,7 +579,7 @@ def tree_initial_states(config, tree, keys: Sequence[str], columns: Mapping[str,
             y[:, at + int(path.steps[3])] = values
         else:
             y[:, at: at + 3] = values.reshape(len(rows), 3)
-    if not (placed["x"].any() or placed["v"].any()):
+    if not (place and (placed["x"].any() or placed["v"].any())):
         return y
     if not moved:
         return C.place(C.with_records(tree, params[0], ppoints[0]), y, placed["x"], placed["v"])
