@@ -176,3 +176,27 @@ def test_batch_of_saturated_runs():
                                          "grid": {"controller.saturation.torque_n.1": [80.0]}})
     with pytest.raises(SweepSpecError, match="controller.saturation.torque_n' is not set"):
         plan_table(unlimited_entry)
+
+
+def test_batch_of_limits_and_pushes_varied_where_the_template_has_none():
+    """The one-body keys that move to the body (K_t, the limit of H) or to both ends of the
+    joint (R) in its one-body tree, limits the template leaves unlimited, a push's value,
+    on a pinned body and on a visco-elastic one: each run's record, bit for bit its
+    validated configuration's."""
+    push = yaml.safe_load((ROOT / "configs" / "examples" / "saturated_push.yaml").read_text())
+    held = yaml.safe_load(BASES[1].read_text())
+    held["name"] = "held"
+    held["controller"]["saturation"] = {"torque_n": 300.0, "constraint_force": [900.0, 900.0, 800.0]}
+    held["disturbances"] = push["disturbances"][:1]
+    spec = spec_from_mapping({
+        "name": "s", "base": [push, held],
+        "zip": {"controller.saturation.force_h": [[30.0, 40.0, 50.0], [5.0, 6.0, 7.0], [1e3, 1e3, 1e3]],
+                "controller.saturation.torque_n.0": [2.0, 3.0, 5.0],
+                "controller.k_t.2": [10.0, 20.0, 30.0],
+                "body.attachment_point": [[0.0, 0.0, -0.3], [0.01, 0.02, -0.4], [0.0, 0.1, -0.2]],
+                "disturbances.0.value.0": [0.5, 0.8, 1.2]},
+    })
+    table = plan_table(spec)
+    batch = _check(table, np.arange(table.n))
+    assert set(batch.params["force_limit"][:, 0, 1]) == {40.0, 6.0, 1e3}
+    assert set(batch.params["disturbance_value"][:, 0, 0, 0]) == {0.5, 0.8, 1.2}
