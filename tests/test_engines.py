@@ -305,9 +305,10 @@ def test_group_configs_equal_validated_configs():
 
 
 def test_runs_of_one_config_share_a_variant_and_give_each_ones_bits(monkeypatch):
-    """A worker's runs that differ only in initial state share one variant (its parameters
-    and equilibrium computed once), and each gets the bits it gets alone, also through calls
-    that reuse one buffer of trajectories; gravity makes the equilibrium a computed one."""
+    """A worker's runs that differ only in initial state share one compiled tree (its
+    records and equilibrium computed once), and each gets the bits it gets alone, also
+    through calls that reuse one buffer of trajectories; gravity makes the equilibrium a
+    computed one."""
     spec = sweep_spec(5, extra={"grid": {"body.gravity": [[0.0, 0.0, 0.0], [0.0, 0.0, -9.81]]}})
     runs = expand(spec)
     tasks = [RunTask(r.run_id, r.config.resolved, "x.h5") for r in runs]
@@ -316,10 +317,10 @@ def test_runs_of_one_config_share_a_variant_and_give_each_ones_bits(monkeypatch)
     made = []
     import rbstab.engine.batch as batch
 
-    real = batch.paper_form
-    monkeypatch.setattr(batch, "paper_form", lambda config: made.append(config.name) or real(config))
+    real = batch.C.compile_chain
+    monkeypatch.setattr(batch.C, "compile_chain", lambda chain, **kw: made.append(chain) or real(chain, **kw))
     got = dict(simulate_many(configs, chunk_size=3))  # 4 compiled calls into one buffer
-    assert len(made) == 2  # one variant per gravity
+    assert len(made) == 2  # one per gravity
     monkeypatch.undo()
     for i, run in enumerate(runs):
         alone = dict(simulate_many([run.config]))[0]

@@ -34,7 +34,6 @@ from ..config.paths import parse_any_key
 from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, is_chain
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, set_limits
 from ..variants import chain as C
-from ..variants.paper import paper_form, paper_initial_state
 from ..variants.registry import record_offsets
 from .settings import SETTING_COLUMNS, SETTINGS, settings_records, settings_rows
 from .tableaus import METHODS
@@ -281,17 +280,20 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
     return _paper_runs(batch) if one_body else batch
 
 
-def _paper_runs(batch: RunBatch) -> RunBatch:
-    """``batch`` of one-body trees as the paper's one body runs them: each run's state its
-    variant's (:data:`rbstab.layout.VARIANT_LAYOUTS`: a permanent joint's Theta and Omega),
-    zero-padded to :data:`MAX_STATE`, and h in its record's ``lyapunov_offset`` (written in
-    ``batch.params``)."""
-    n_state = np.asarray(STATE_SIZE, dtype=np.int64)[batch.codes]
-    y0 = np.zeros((len(batch), MAX_STATE))
-    width = min(MAX_STATE, batch.y0.shape[1])
-    y0[:, :width] = np.where(np.arange(width) < n_state[:, None], batch.y0[:, :width], 0.0)
-    batch.params["lyapunov_offset"][:, 0] = batch.offset
-    return dataclasses.replace(batch, y0=y0, n_state=n_state, one_body=np.ones(len(batch), dtype=bool))
+def _paper_runs(batch: RunBatch, rows: np.ndarray | None = None) -> RunBatch:
+    """``batch`` with the one-body trees ``rows`` (bool (n,); None: every run) as the
+    paper's one body runs them: each run's state its variant's
+    (:data:`rbstab.layout.VARIANT_LAYOUTS`: a permanent joint's Theta and Omega), the
+    states zero-padded to :data:`MAX_STATE` at least, and h in its record's
+    ``lyapunov_offset`` (written in ``batch.params``)."""
+    rows = np.ones(len(batch), dtype=bool) if rows is None else rows
+    n_state = batch.n_state.copy()
+    n_state[rows] = np.asarray(STATE_SIZE, dtype=np.int64)[batch.codes[rows]]
+    y0 = np.zeros((len(batch), max(MAX_STATE, batch.y0.shape[1])))
+    y0[:, : batch.y0.shape[1]] = batch.y0
+    y0[np.arange(y0.shape[1]) >= n_state[:, None]] = 0.0
+    batch.params["lyapunov_offset"][rows, 0] = batch.offset[rows]
+    return dataclasses.replace(batch, y0=y0, n_state=n_state, one_body=rows.copy())
 
 
 def _rigid(p: np.ndarray, mass: np.ndarray, inertia: np.ndarray, r: np.ndarray, gravity: np.ndarray) -> None:
@@ -358,53 +360,50 @@ def _bounds(f: TableFields, templates: Sequence[Mapping]) -> np.ndarray | None:
 # -- trees -----------------------------------------------------------------------------------------
 def batch_of(configs: Sequence, timeout: float | None = None) -> RunBatch:
     """The :class:`RunBatch` of validated configurations (:class:`rbstab.config.RunConfig`
-    in either spelling; ``timeout`` [s], if given, each run's
-    ``max_wall_time``). Configs that share their Chain object share its compilation (a
-    sweep over initial states compiles its chain once); one-body configs that share their
-    body and gains objects (:meth:`rbstab.config.RunConfig.from_resolved` with ``like``)
-    share one variant, its record and equilibrium computed once."""
-    trees: list = []
-    structures: dict = {}  # a chain's id, or a one-body variant's name -> its tree
-    shared: dict[tuple, object] = {}
+    in either spelling; ``timeout`` [s], if given, each run's ``max_wall_time``): each
+    run's compiled tree's records (:func:`rbstab.variants.chain.compile_chain`, h included)
+    with its admissible region, and its state; the runs in one body's spelling then in the
+    paper's form (:func:`_paper_runs`), those of one law sharing one structure. Configs that
+    share their Chain object share its compilation and h (a sweep over initial states
+    compiles its chain once; :meth:`rbstab.config.RunConfig.from_resolved` with ``like``)."""
     n = len(configs)
-    tree, n_state = np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
     one_body = np.array([not is_chain(c) for c in configs], dtype=bool)  # the spelling, as a table's
-    runs = []  # each run's (records, parent points, initial state)
+    compiled: dict[int, tuple] = {}  # a chain's id -> (its compiled chain, the chain, kept alive)
+    structures: dict = {}  # a tree's chain's id, or a one-body law's name -> its index in trees
+    trees: list = []
+    tree = np.empty(n, dtype=np.int64)
     for i, config in enumerate(configs):
-        key = config.chain.joints[0].variant if one_body[i] else id(config.chain)
-        t = structures.get(key)
-        if t is None:
-            t = structures[key] = len(trees)
-            trees.append(C.compile_chain(config.chain, offset=0.0 if one_body[i] else None))
-        tree[i], c = t, trees[t]
-        if one_body[i]:
-            part = (id(config.chain), id(config.simulation.limits))  # the objects of configs alike (eq=False)
-            variant = shared.get(part)
-            if variant is None:
-                variant = shared[part] = (paper_form(config), config)  # the config keeps the ids alive
-            variant = variant[0]
-            records = variant.parameters  # (1,), its h in lyapunov_offset
-            runs.append((records, records["attachment_point"], paper_initial_state(config, variant)))
-        else:
-            records = c.params.copy()
-            set_limits(records, config.simulation.limits)
-            runs.append((records, c.ppoints, C.initial_state(config)))
-    width, size = max((c.size for c in trees), default=1), max((len(r[2]) for r in runs), default=0)
-    params, ppoints, y0 = np.zeros((n, width), dtype=PARAMETERS), np.zeros((n, width, 3)), np.zeros((n, size))
-    offset = np.zeros(n)
-    for i, (records, points, state) in enumerate(runs):
-        params[i, : len(records)], ppoints[i, : len(records)], n_state[i] = records, points, len(state)
-        y0[i, : len(state)] = state
-        offset[i] = records[0]["lyapunov_offset"] if one_body[i] else trees[tree[i]].offset
+        if id(config.chain) not in compiled:
+            compiled[id(config.chain)] = (C.compile_chain(config.chain), config.chain)
+        c = compiled[id(config.chain)][0]
+        key = c.chain.joints[0].variant if one_body[i] else id(config.chain)
+        if key not in structures:
+            structures[key] = len(trees)
+            trees.append(c)
+        tree[i] = structures[key]
+    width = max((c.size for c in trees), default=1)
+    params, ppoints = np.zeros((n, width), dtype=PARAMETERS), np.zeros((n, width, 3))
+    y0 = np.zeros((n, max((c.n_states for c in trees), default=0)))
+    n_state, offset = np.zeros(n, dtype=np.int64), np.zeros(n)
+    for i, config in enumerate(configs):
+        c = compiled[id(config.chain)][0]
+        params[i, : c.size], ppoints[i, : c.size], offset[i] = c.params, c.ppoints, c.offset
+        set_limits(params[i, : c.size], config.simulation.limits)
+        state = C.initial_state(config)
+        y0[i, : len(state)], n_state[i] = state, len(state)
     settings = settings_records(settings_rows([c.simulation for c in configs], timeout), 0)
     settings["method"] = [_method(c.simulation.method) for c in configs]
     # the pure sign law (the paper's one body in either spelling: the loader refuses it in any other tree)
     sign_law = np.array([any(j.variant == "sliding" and not j.boundary_layer for j in c.chain.joints)
                          for c in configs], dtype=bool)
-    return RunBatch(trees=tuple(trees), tree=tree, params=params, ppoints=ppoints, offset=offset, y0=y0,
-                    n_state=n_state, settings=settings,
-                    n_samples=np.array([c.simulation.n_samples for c in configs], dtype=np.int64),
-                    compiled=(settings["method"] != NOT_COMPILED) & ~sign_law, one_body=one_body)
+    batch = RunBatch(trees=tuple(trees), tree=tree, params=params, ppoints=ppoints, offset=offset, y0=y0,
+                     n_state=n_state, settings=settings,
+                     n_samples=np.array([c.simulation.n_samples for c in configs], dtype=np.int64),
+                     compiled=(settings["method"] != NOT_COMPILED) & ~sign_law, one_body=np.zeros(n, dtype=bool))
+    if not one_body.any():
+        return batch
+    batch = _paper_runs(batch, one_body)
+    return dataclasses.replace(batch, y0=batch.y0[:, : max(int(batch.n_state.max()), 1)])
 
 
 def _trees_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
