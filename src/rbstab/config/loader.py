@@ -381,51 +381,33 @@ def _build(
         raise ConfigError([_BOTH], source)
     run = _validated(plain_tree(data), default_name, source, overrides)
     ctrl = run.controller
-    used = VARIANTS[ctrl.variant].required_gains
-    gains = Gains(
-        **{g: _matrix(getattr(ctrl, g)) for g in GAIN_NAMES if g in used},
-        k_s=float(ctrl.k_s) if "k_s" in used else None,
-        boundary_layer=float(ctrl.boundary_layer) if "k_s" in used else 0.0,
-        saturation=saturation_of(None if ctrl.saturation is None else ctrl.saturation.model_dump()),
-    )
-    body = RigidBody(
-        mass=float(run.body.mass),
-        inertia=_matrix(run.body.inertia),
-        attachment_point=_array(run.body.attachment_point),
-        gravity=_array(run.body.gravity),
-    )
-    sim = run.simulation
-    simulation = simulation_settings(sim)
-    used_gains = {g: getattr(gains, g) for g in (*GAIN_NAMES, "k_s") if g in used}
-    _check_weight(ctrl, body, gains, used_gains, source, overrides)
-    initial_state = {block: _array(getattr(run.initial_state, key)) for key, block in INITIAL_STATE_BLOCKS.items()}
     dump = run.model_dump()
     dump["controller"] = {k: v for k, v in dump["controller"].items() if v is not None}
     if dump.get("disturbances") is None:
         dump.pop("disturbances", None)  # a run without: its resolved form as before
     else:
         dump["disturbances"] = [{k: v for k, v in d.items() if v is not None} for d in dump["disturbances"]]
-        gains = dataclasses.replace(gains, disturbances=disturbances_of(dump["disturbances"]))
-    resolved_simulation(dump["simulation"], sim)
-    chain = _one_body_chain(body, gains, ctrl.variant)
-    if simulation.limits is not None:  # the state as a tree places it: a permanent body's x, v from its pin
+    resolved_simulation(dump["simulation"], run.simulation)
+    # plain dicts, lists, str and numbers (the validators make new lists; tested)
+    config = RunConfig.from_resolved(dump)
+    chain = config.chain
+    body, joint = chain.bodies[0], chain.joints[0]
+    used = VARIANTS[ctrl.variant].required_gains
+    used_gains = {g: getattr(body if g in ("k_t", "l_t") else joint, g) for g in (*GAIN_NAMES, "k_s") if g in used}
+    _check_weight(ctrl, body.mass, chain.gravity, used_gains, joint.boundary_layer, source, overrides)
+    limits = config.simulation.limits
+    if limits is not None:  # the state as a tree places it: a permanent body's x, v from its pin
         given = {key: getattr(run.initial_state, key) for key in INITIAL_STATE_BLOCKS
                  if not (point_fixed(ctrl.variant) and key in ("x", "v"))}
-        states, _, errors = _place_tree({ONE_BODY_NAMES[0]: given}, chain, simulation.gimbal_margin, source, overrides)
-        _check_limits(chain, states, errors, simulation.limits, sim.limits.model_dump(), source, overrides,
+        states, _, errors = _place_tree({ONE_BODY_NAMES[0]: given}, chain, config.simulation.gimbal_margin, source,
+                                        overrides)
+        _check_limits(chain, states, errors, limits, run.simulation.limits.model_dump(), source, overrides,
                       one_body=True)
     definite = VARIANTS[ctrl.variant].definite_gains or tuple(used_gains)
     as_written = {g: getattr(ctrl, g) for g in used_gains if g in definite}  # 3 numbers: no numpy needed
     found_warnings = _notes(chain, ["body.inertia"], [("initial_state.theta", run.initial_state.theta)],
                             [("controller.", as_written)], source)
-    return RunConfig(
-        name=run.name,
-        chain=chain,
-        initial_state={ONE_BODY_NAMES[0]: initial_state},
-        simulation=simulation,
-        resolved=dump,  # plain dicts, lists, str and numbers (the validators make new lists; tested)
-        warnings=found_warnings,
-    )
+    return dataclasses.replace(config, warnings=found_warnings)
 
 
 def simulation_settings(sim) -> SimulationSettings:
@@ -475,10 +457,10 @@ def _validated(data: dict, default_name: str | None, source: str | None, overrid
         raise ConfigError(lines, source) from None
 
 
-def _check_weight(ctrl, body: RigidBody, gains: Gains, used_gains: dict, source: str | None,
-                  overrides: Sequence[str]) -> None:
+def _check_weight(ctrl, mass: float, gravity: np.ndarray, used_gains: dict, boundary_layer: float,
+                  source: str | None, overrides: Sequence[str]) -> None:
     """ConfigError when the gains leave the weight unheld (no equilibrium, :func:`unheld_weight`)."""
-    unheld = unheld_weight(ctrl.variant, body.mass, body.gravity, used_gains, gains.boundary_layer)
+    unheld = unheld_weight(ctrl.variant, mass, gravity, used_gains, boundary_layer)
     if unheld is None:
         return
     key, detail = unheld
