@@ -304,7 +304,7 @@ def test_group_configs_equal_validated_configs():
             assert not config.initial_state["body"][block].flags.writeable
 
 
-def test_runs_of_one_config_share_a_variant_and_give_each_ones_bits(monkeypatch):
+def test_runs_of_one_config_share_a_compiled_tree_and_give_each_ones_bits(monkeypatch):
     """A worker's runs that differ only in initial state share one compiled tree (its
     records and equilibrium computed once), and each gets the bits it gets alone, also
     through calls that reuse one buffer of trajectories; gravity makes the equilibrium a
