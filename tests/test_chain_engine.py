@@ -656,3 +656,21 @@ def test_a_gimbal_lock_names_the_body_that_reached_it_not_the_one_furthest_at_th
     assert result.status == "failed"
     assert result.message.startswith("gimbal lock: |theta_2| of body spinner's Theta reached pi/2 - 0.3 rad at t = ")
     assert float(result.message.split("at t = ")[1].split(" s")[0]) == pytest.approx((np.pi / 2 - 0.3) / 3, rel=1e-5)
+
+
+def test_a_basin_map_across_the_gimbal_lock_reads_alike_in_both_spellings_of_one_body():
+    """Case 2's body tilted through |theta_2| = pi/2 - gimbal_margin in its one-body and its
+    tree spelling: the same outcomes, times and v at every point, and the same words for the
+    points outside the domain (the body's own Euler angles, whichever way it is written)."""
+    from rbstab.analysis.basin import OUTSIDE, BasinAxis, basin_map
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        one = load_config(ROOT / "configs" / "paper" / "case2_visco_elastic.yaml")
+        tree = tree_spelling(one)
+    maps = [basin_map(config, [BasinAxis.parse(f"initial_state.{body}theta.1=-2:2:5"),
+                               BasinAxis.parse(f"initial_state.{body}omega.0=-5:5:3")], n_samples=101)
+            for config, body in ((one, ""), (tree, "body."))]
+    for name in ("outcome", "time_to_converge", "lyapunov_initial", "lyapunov_final"):
+        np.testing.assert_array_equal(getattr(maps[0], name), getattr(maps[1], name), err_msg=name)
+    assert maps[0].messages == maps[1].messages == {OUTSIDE: 6}

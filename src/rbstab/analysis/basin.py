@@ -288,7 +288,7 @@ def basin_map(
     states = runs.states(axes, np.column_stack([first.ravel(), second.ravel()]))
     # the one check an initial state of a valid configuration can fail (the grid's values are finite)
     inside = np.ones(len(states), dtype=bool)
-    if runs.tree is None:  # one body's theta_2 (a tree's runs fail at t = 0 with the body or joint named)
+    if runs.compiled.one_body:  # the body's theta_2, in either spelling (a tree's runs fail at t = 0 naming it)
         inside = np.abs(states[:, 1]) < np.pi / 2 - config.simulation.gimbal_margin
     points = np.flatnonzero(inside)
     outcome = np.full(len(states), 2, dtype=np.int8)

@@ -905,7 +905,7 @@ def _drawn_states(config, runs: Runs, axes, values: np.ndarray) -> np.ndarray:
         check_entries(config, entries)
     except ValueError as exc:
         raise ValueError(str(exc).replace("--basin ", "--basin-stability ", 1)) from None
-    for axis, lo, hi in axes if runs.tree is None else ():
+    for axis, lo, hi in axes if runs.compiled.one_body else ():  # the paper's body, in either spelling
         if axis.block == "theta" and axis.index == 1:
             from ..kinematics import GIMBAL_LOCK_ANGLE  # heavy: numba
             from .basin import OUTSIDE  # heavy: numba

@@ -188,7 +188,6 @@ class Runs:
         self._tau: float | None = None  # the slowest time constant [s], once a run needs it
         self._longer: dict[float, Runs] = {}  # the runs of each longer t_end, built once
         self.base = batch_of([config])
-        self.tree = config.chain if is_chain(config) else None
         from ..variants import chain as C  # heavy: numba
 
         size = self.base.trees[0].size  # the compiled tree (one body's: its one-body tree)
