@@ -259,7 +259,13 @@ def tree_resolved(resolved: Mapping) -> dict:
     one-body tree (:class:`RunConfig`), the body ``body`` with K_t, L_t and the limit of H,
     held at R to the ground point R by the joint ``controller`` with the law, the other gains
     and the limits of N and Lambda; a ``permanent`` joint's child's x and v left to be placed.
-    ``config_from_mapping`` of it is the same tree. Not modified."""
+    ``config_from_mapping`` of it is the same tree. Not modified.
+
+    Raises
+    ------
+    KeyError
+        For a mapping without the one-body sections (``body``, ``controller``,
+        ``initial_state``): validate it with :func:`config_from_mapping` first."""
     r = copy.deepcopy(dict(resolved))
     body, controller, state = r.pop("body"), r.pop("controller"), r.pop("initial_state")
     point = body.pop("attachment_point")
@@ -388,8 +394,7 @@ def _build(
     else:
         dump["disturbances"] = [{k: v for k, v in d.items() if v is not None} for d in dump["disturbances"]]
     resolved_simulation(dump["simulation"], run.simulation)
-    # plain dicts, lists, str and numbers (the validators make new lists; tested)
-    config = RunConfig.from_resolved(dump)
+    config = RunConfig.from_resolved(dump)  # dump: plain dicts, lists, str, numbers (new lists; tested)
     chain = config.chain
     body, joint = chain.bodies[0], chain.joints[0]
     used = VARIANTS[ctrl.variant].required_gains
