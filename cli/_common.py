@@ -114,7 +114,7 @@ def template_stiffness_warnings(loaded, table, *, sign_law: bool = False) -> lis
     (:func:`rbstab.analysis.stiffness.sweep_stiffness_warnings`); none where W008 is silenced.
     ``sign_law``: compile the sign law's kernels too where they are not yet (a sweep that
     runs compiles them all at once)."""
-    if not _stiffness_checked(one_body=loaded.may_run_one_body, chain=loaded.is_chain, sign_law=sign_law):
+    if not _stiffness_checked(one_body=loaded.may_run_one_body, chain=loaded.may_run_tree, sign_law=sign_law):
         return []
     from rbstab.analysis.stiffness import sweep_stiffness_warnings  # heavy: numba, scipy
 

@@ -7,6 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from conftest import initial_blocks, paper_body, paper_gains
+from rbstab.config import load_config
 from rbstab.engine import GROUPS, METHODS, integrate_runs, status, tableaus
 from rbstab.variants import VARIANTS
 
@@ -254,6 +255,59 @@ def test_a_one_body_run_uses_only_the_kernels_the_engine_group_warms():
     found = subprocess.run([sys.executable, "-c", _UNWARMED, parts, "body.mass", *paths],
                            capture_output=True, text=True, check=True)
     assert found.stdout.strip() == "[]", found.stdout + found.stderr
+
+
+def test_one_body_written_as_a_tree_uses_only_the_kernels_the_engine_group_warms(tmp_path):
+    """The paper's one body written as a tree (bodies, joints) is the one body the engine
+    group compiles for (rbstab.engine.kernel_groups): its runs (the pinned body's state
+    reduced from the tree's, its centre of pressure under gravity), its analysis and a
+    sweep's runs call no kernel the group leaves out, as in one body's spelling."""
+    import subprocess
+    import sys
+
+    import yaml
+
+    from conftest import ROOT, tree_spelling
+
+    paths = []
+    for name in ("paper/case1_permanent", "paper/case3_embedded", "examples/saturated_pendulum"):
+        path = tmp_path / f"{name.partition('/')[2]}.yaml"
+        path.write_text(yaml.safe_dump(tree_spelling(load_config(ROOT / "configs" / f"{name}.yaml")).resolved))
+        paths.append(str(path))
+    parts = ",".join((*GROUPS["engine"], *GROUPS["analysis"]))
+    found = subprocess.run([sys.executable, "-c", _UNWARMED, parts, "bodies.body.mass", *paths],
+                           capture_output=True, text=True, check=True)
+    assert found.stdout.strip() == "[]", found.stdout + found.stderr
+
+
+def test_a_sweep_compiles_a_trees_kernels_where_a_run_may_be_another_model_than_the_papers_one_body(tmp_path):
+    """A sweep's kernel groups follow its runs' physics, not their spelling
+    (SweepSpec.may_run_tree): a tree's kernels for a base of two bodies, for one body held
+    elsewhere than at its own point, and where the sweep varies its joint's point or lower
+    torque limit; not for the paper's one body in either spelling with its gains, limits,
+    mass and initial state varied."""
+    import yaml
+
+    from conftest import ROOT, tree_spelling
+    from rbstab.sweep.spec import spec_from_mapping
+
+    case1 = ROOT / "configs" / "paper" / "case1_permanent.yaml"
+    tree = tree_spelling(load_config(case1)).resolved
+    (tmp_path / "tree.yaml").write_text(yaml.safe_dump(tree))
+    tree["joints"][0]["parent_point"] = [0.0, 0.0, 0.1]
+    (tmp_path / "held_elsewhere.yaml").write_text(yaml.safe_dump(tree))
+
+    def may_run_tree(base, grid):
+        return spec_from_mapping({"name": "s", "base": str(base), "grid": grid}).may_run_tree
+
+    kept = {"joints.controller.k_r.0": [100.0, 200.0], "joints.controller.saturation.torque_n": [50.0],
+            "bodies.body.mass": [1.0, 2.0], "initial_state.body.theta.0": [0.1], "gravity.2": [-9.0]}
+    assert not may_run_tree(case1, {"controller.k_r.0": [100.0, 200.0], "body.attachment_point.2": [0.1, 0.2]})
+    assert not may_run_tree(tmp_path / "tree.yaml", kept)
+    assert may_run_tree(tmp_path / "tree.yaml", {"joints.controller.child_point.2": [0.1, 0.2]})
+    assert may_run_tree(tmp_path / "tree.yaml", {"joints.controller.saturation.torque_n_lower": [-5.0]})
+    assert may_run_tree(tmp_path / "held_elsewhere.yaml", {"bodies.body.mass": [1.0, 2.0]})
+    assert may_run_tree(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", {"bodies.trunk.mass": [60.0]})
 
 
 def test_a_tree_run_uses_only_the_kernels_the_chain_group_warms():

@@ -450,7 +450,7 @@ def execute_sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, ov
     ex, owned = _sweep_executor(executor, scheduler, connect_timeout)
     try:
         one_body = loaded.may_run_one_body  # compiled once, before any worker starts
-        ensure_compiled(say=log, one_body=one_body, sign_law=one_body, chain=loaded.is_chain)
+        ensure_compiled(say=log, one_body=one_body, sign_law=one_body, chain=loaded.may_run_tree)
         return run_sweep(loaded, output, executor=ex, jobs=jobs, log=log, **options)
     finally:
         if owned:

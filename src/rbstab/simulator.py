@@ -606,8 +606,12 @@ def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, st
     grounded = held and bool(np.any(structure.chain.gravity))
     pressure = traces and full and tree  # the centres of pressure as outputs
     trees = [compiled[i] for i in first]
-    if (traces and full and structure.hinged) or (held and pressure):
+    paper = all(t.one_body for t in trees)  # one joint to the ground: its centre of pressure the net one's
+    if (traces and full and structure.hinged) or (held and pressure and not paper):
         _reactions(structure, trees, index, time, states, outputs)
+    elif held and pressure:  # the paper's pinned body: body_pressure's point (C.evaluate's), as one body's spelling
+        net = outputs.setdefault("net_centre_of_pressure", np.full((*states.shape[:2], 3), np.nan))
+        outputs["centre_of_pressure"] = net[:, :, None].copy()
     elif grounded and summary and "net_centre_of_pressure" not in outputs:  # at the samples its figure reads
         stride = summary_stride(len(time))
         outputs["net_centre_of_pressure"] = np.full((*states.shape[:2], 3), np.nan)

@@ -272,7 +272,6 @@ def tree_impulses(t, y, p):
     velocities jump by M^-1 S' P: the joints' impulsive reactions keep them joints); returns
     their energy [J]."""
     return reduced_impulses(t, y, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at, p.u_at, p.rd_at, p.work)
-    return jump
 
 
 # -- what the driver asks of a system ----------------------------------------------------------

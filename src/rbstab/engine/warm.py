@@ -114,12 +114,15 @@ def _warm_up_rest() -> None:
 def _warm_up_paper_permanent() -> None:
     """A run of the paper's one body on a permanent joint as every one-body run goes
     (:func:`rbstab.engine.integrate.integrate_chain_runs`): its reduced samples (Theta,
-    Omega) expanded to the chain's state (:func:`rbstab.variants.tree.expand_samples`)."""
+    Omega) expanded to the chain's state (:func:`rbstab.variants.tree.expand_samples`); from
+    its reduced state (one body's spelling) and from the chain's state (a tree's,
+    :func:`rbstab.variants.tree.reduce_states`)."""
     eye, point = np.eye(3), np.array([0.0, 0.0, -1.0])
     chain = single(Body("body", 1.0, eye), Joint("joint", GROUND, 0, point, point, "permanent", eye, eye), -point)
     compiled = C.compile_chain(chain, offset=0.0)
     settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3, 10.0, np.inf]])
-    integrate_chain_runs(tree_system(compiled), np.zeros((1, 6)), settings, method="DOP853", n_samples=2)
+    for y0 in (np.zeros(6), C._place(compiled, np.zeros(compiled.n_states))):
+        integrate_chain_runs(tree_system(compiled), y0[None], settings, method="DOP853", n_samples=2)
 
 
 def warm_up(parts: str = "rates,outputs,summary,switching,driver,chains,rest") -> None:

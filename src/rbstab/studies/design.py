@@ -509,7 +509,7 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
     spec = spec_from_mapping(mapping)
     members = members_of(base)
     one_body = spec.may_run_one_body
-    ensure_compiled(say=log, one_body=one_body, sign_law=one_body, chain=spec.is_chain)
+    ensure_compiled(say=log, one_body=one_body, sign_law=one_body, chain=spec.may_run_tree)
     run_sweep(spec, folder.parent, executor=executor or "local", jobs=jobs, scheduler=scheduler, log=log,
               engine=engine, store=store,
               progress=progress, command_line=command_line)

@@ -63,6 +63,7 @@ from __future__ import annotations
 import copy
 import math
 import re
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -208,6 +209,12 @@ class Base:
     source: str | None = None
 
 
+#: The fields of a joint of one body's tree that a sweep may vary and keep it the paper's one
+#: body (:attr:`SweepSpec.may_run_tree`): its gains and limits, a lower torque limit left out.
+PAPER_JOINT_FIELDS = frozenset({"k_r", "l_r", "k_c", "l_c", "k_d", "l_d", "k_s", "boundary_layer",
+                                "saturation.torque_n", "saturation.constraint_force", "saturation.shape"})
+
+
 @dataclass(frozen=True)
 class SweepSpec:
     """A validated sweep spec (see the module docstring).
@@ -257,6 +264,38 @@ class SweepSpec:
         the one-body kernels are compiled before the workers start
         (:func:`rbstab.engine.ensure_compiled`)."""
         return any(not is_chain(b.data) or len(b.data.get("bodies") or ()) == 1 for b in self.bases)
+
+    @property
+    def may_run_tree(self) -> bool:
+        """Whether a run may be a model other than the paper's one body
+        (:func:`rbstab.variants.paper.has_paper_form`), so that a tree's kernels are compiled
+        before the workers start (:func:`rbstab.engine.ensure_compiled`): a tree base of
+        several bodies, or of one body that is not the paper's (or that the loader refuses),
+        or a varied key of a joint other than its gains and limits (:data:`PAPER_JOINT_FIELDS`:
+        its points, law, reference, passive torque and lower torque limits make another model)."""
+        trees = [b for b in self.bases if is_chain(b.data)]
+        if not trees:
+            return False
+        for key in self.varied_keys:
+            parts = key.split(".")
+            if parts[0] == "joints" and ".".join(parts[2:4] if parts[2:3] == ["saturation"] else parts[2:3]) \
+                    not in PAPER_JOINT_FIELDS:
+                return True
+        from ..config.loader import config_from_mapping  # heavy: numba (the loader's tree)
+        from ..variants.paper import has_paper_form  # heavy: numba
+
+        for base in trees:
+            if len(base.data.get("bodies") or ()) != 1:
+                return True
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")  # the sweep's validation reports them
+                    config = config_from_mapping(base.data)
+            except ConfigError:
+                return True
+            if not has_paper_form(config.chain):
+                return True
+        return False
 
     @property
     def varied_keys(self) -> list[str]:
