@@ -81,7 +81,7 @@ def show_config_warnings(found: dict[str, list[str]], n_configs: int, noun: str 
         console.warn(line, where)
 
 
-def _stiffness_checked(*, one_body: bool, chain: bool, sign_law: bool = False) -> bool:
+def _stiffness_checked(*, one_body: bool, chain: bool, sign_law: bool = False, solve_ivp: bool = False) -> bool:
     """Whether W008 is to be checked (not silenced); if so, the kernels the linearisation
     runs (the analysis's: a tree's rest state) are compiled first where they are not yet
     (said as ``rbstab run`` says it)."""
@@ -90,7 +90,8 @@ def _stiffness_checked(*, one_body: bool, chain: bool, sign_law: bool = False) -
         return False
     from rbstab.engine import ensure_compiled  # heavy: numba, numpy
 
-    ensure_compiled(say=console.info, one_body=one_body, sign_law=sign_law, chain=chain, analysis=True)
+    ensure_compiled(say=console.info, one_body=one_body, sign_law=sign_law, chain=chain, analysis=True,
+                    solve_ivp=solve_ivp)
     return True
 
 

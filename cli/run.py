@@ -136,7 +136,7 @@ def _load_kernels(loaded) -> None:
 
     groups = {**kernel_groups(loaded), "sign_law": any(is_sign_law(c) for c in loaded)}  # either spelling
     groups["engine"] = kernel_groups([c for c in loaded if uses_compiled_engine(c, "compiled")])["one_body"]
-    parts = [p for group in ("engine", "sign_law", "chain") if groups[group] for p in GROUPS[group]]
+    parts = [p for group in ("engine", "sign_law", "chain", "solve_ivp") if groups[group] for p in GROUPS[group]]
     start = time.perf_counter()
     if any(c.chain.gravity.any() for c in loaded):
         import scipy.optimize  # noqa: F401  (heavy: scipy) the equilibrium under gravity

@@ -262,22 +262,23 @@ def test_analyze_compiles_what_an_analysis_adds_to_the_engine(tmp_path, monkeypa
         result = CliRunner().invoke(cli, ["analyze", str(config), "--no-certificate", "--no-simulation", "-o",
                                           str(tmp_path / config.stem)])
         assert result.exit_code == 0, result.output
-        assert asked[0] == {"one_body": not chain, "chain": chain, "analysis": True}, config.name
+        assert asked[0] == {"one_body": not chain, "chain": chain, "solve_ivp": False, "analysis": True}, config.name
 
 
 def test_run_compiles_the_kernel_groups_of_the_models_it_runs(tmp_path, monkeypatch):
     """rbstab run asks for the one-body group where a model is the paper's one body, in
     either spelling, and for the tree's group only where a model is another tree (a paper
     case's cold start compiles the one-body group and the analysis's rest state, which its
-    W008 check linearises; a tree's, the tree's group alone), and for the sign law's only
-    where a one-body config has it."""
+    W008 check linearises; a tree's, the tree's group alone), for the sign law's only
+    where a one-body config has it, and for scipy's methods' kernels only where a run goes to
+    them (an implicit method)."""
     import rbstab.engine
 
     asked = []
     monkeypatch.setattr(rbstab.engine, "ensure_compiled", lambda say=None, **groups: asked.append(groups))
     short = ["--set", "simulation.t_end=0.01", "--set", "simulation.n_samples=3"]
-    one_body = {"one_body": True, "sign_law": False, "chain": False, "analysis": True}
-    tree = {"one_body": False, "sign_law": False, "chain": True, "analysis": True}
+    one_body = {"one_body": True, "sign_law": False, "chain": False, "solve_ivp": False, "analysis": True}
+    tree = {"one_body": False, "sign_law": False, "chain": True, "solve_ivp": False, "analysis": True}
     as_tree = tmp_path / "as_tree.yaml"  # the paper's one body written as a tree: its model is one body's
     as_tree.write_text(yaml.safe_dump({
         "name": "as_tree", "gravity": [0, 0, 0],
@@ -296,3 +297,9 @@ def test_run_compiles_the_kernel_groups_of_the_models_it_runs(tmp_path, monkeypa
                                       "--set", "controller.boundary_layer=0", "-o", str(tmp_path / "sign")])
     assert result.exit_code == 0, result.output
     assert asked[0] == {**one_body, "sign_law": True}
+    stance = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
+    for config, expected in ((PAPER_CONFIGS[0], one_body), (stance, tree)):
+        asked.clear()
+        result = CliRunner().invoke(cli, ["run", str(config), *short, "--method", "Radau", "-o", str(tmp_path / "r")])
+        assert result.exit_code == 0, result.output
+        assert asked[0] == {**expected, "solve_ivp": True}, config.name

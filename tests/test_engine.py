@@ -285,7 +285,8 @@ def test_a_sweep_compiles_a_trees_kernels_where_a_run_may_be_another_model_than_
     (SweepSpec.may_run_tree): a tree's kernels for a base of two bodies, for one body held
     elsewhere than at its own point, and where the sweep varies its joint's point or lower
     torque limit; not for the paper's one body in either spelling with its gains, limits,
-    mass and initial state varied."""
+    mass and initial state varied. Scipy's methods' kernels (SweepSpec.may_run_scipy) where a
+    run goes to them."""
     import yaml
 
     from conftest import ROOT, tree_spelling
@@ -308,6 +309,67 @@ def test_a_sweep_compiles_a_trees_kernels_where_a_run_may_be_another_model_than_
     assert may_run_tree(tmp_path / "tree.yaml", {"joints.controller.saturation.torque_n_lower": [-5.0]})
     assert may_run_tree(tmp_path / "held_elsewhere.yaml", {"bodies.body.mass": [1.0, 2.0]})
     assert may_run_tree(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", {"bodies.trunk.mass": [60.0]})
+    # scipy's methods' kernels where a run goes to them: the engine scipy, a method the compiled engine leaves out
+    spec = spec_from_mapping({"name": "s", "base": str(case1), "grid": {"controller.k_r.0": [100.0]}})
+    assert not spec.may_run_scipy() and not spec.may_run_scipy("compiled") and spec.may_run_scipy("scipy")
+    assert spec_from_mapping({"name": "s", "base": str(case1), "grid": {"simulation.method": ["RK45", "Radau"]}}
+                             ).may_run_scipy()
+    assert spec_from_mapping({"name": "s", "base": str(case1), "grid": {"controller.k_r.0": [100.0]}},
+                             overrides=["simulation.method=BDF"]).may_run_scipy()
+
+
+_SCIPY_UNWARMED = r"""
+import sys, warnings
+import numba
+from rbstab.config import load_config
+from rbstab.engine import GROUPS, kernel_groups, warm_up
+from rbstab.simulator import simulate
+
+warnings.simplefilter("ignore")
+short = ["simulation.t_end=0.01", "simulation.n_samples=3"]
+runs = [(load_config(p, short + extra), engine) for p in sys.argv[1:]
+        for extra, engine in (([], "scipy"), (["simulation.method=Radau"], "compiled"))]
+wanted = {}
+for config, engine in runs:
+    for group, on in kernel_groups([config], engine).items():
+        wanted[group] = wanted.get(group, False) or on
+names = {"one_body": "engine", "chain": "chain", "solve_ivp": "solve_ivp"}
+warm_up(",".join(p for group, on in wanted.items() if on for p in GROUPS[names[group]]))
+
+
+def signatures():
+    return {f"{v.py_func.__module__}.{a}": len(v.signatures) for name, m in list(sys.modules.items())
+            if name.startswith("rbstab") for a, v in list(vars(m).items())
+            if isinstance(v, numba.core.registry.CPUDispatcher)}
+
+
+before = signatures()
+for config, engine in runs:
+    simulate(config, engine=engine)
+after = signatures()
+print(sorted(name for name, count in after.items() if count > before.get(name, 0)))
+"""
+
+
+def test_runs_on_scipys_methods_use_only_the_kernels_their_groups_warm(tmp_path):
+    """A run on scipy's methods (--engine scipy, an implicit method; one body in either
+    spelling, trees) calls no kernel beyond the groups rbstab.engine.kernel_groups names for
+    it (the solve_ivp group: the reduced rate, impulses and breakpoints solve_tree calls from
+    Python), which the commands compile before the first run."""
+    import subprocess
+    import sys
+
+    import yaml
+
+    from conftest import ROOT, tree_spelling
+
+    tree = tmp_path / "case1_tree.yaml"
+    tree.write_text(yaml.safe_dump(tree_spelling(load_config(ROOT / "configs" / "paper" / "case1_permanent.yaml"))
+                                   .resolved))
+    paths = [str(ROOT / "configs" / "paper" / "case1_permanent.yaml"), str(tree),
+             *(str(ROOT / "configs" / "examples" / f"{name}.yaml") for name in ("stance_ankle_hip", "knee"))]
+    found = subprocess.run([sys.executable, "-c", _SCIPY_UNWARMED, *paths], capture_output=True, text=True, check=True)
+    assert found.stdout.strip() == "[]", found.stdout + found.stderr
 
 
 def test_a_tree_run_uses_only_the_kernels_the_chain_group_warms():

@@ -44,7 +44,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from .engine.registry import DEFAULT_ENGINE
-from .layout import is_chain
 
 if TYPE_CHECKING:  # pragma: no cover
     import xarray
@@ -177,12 +176,9 @@ def _integrate(config, engine: str, timeout: float | None) -> "RunResult":
     """The run (one body or a tree), the compiled kernels its model needs made first (once
     per machine and version, cached: :func:`rbstab.engine.ensure_compiled`)."""
     from .engine import ensure_compiled, kernel_groups  # heavy: numba, numpy
-    from .simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
     from .simulator import simulate as integrate  # heavy: numba, numpy
 
-    tree = is_chain(config)
-    if tree or uses_compiled_engine(config, engine):
-        ensure_compiled(sign_law=is_sign_law(config), **kernel_groups([config]))
+    ensure_compiled(sign_law=config.chain.sign_law, **kernel_groups([config], engine))
     return integrate(config, timeout, engine=engine)
 
 
@@ -450,7 +446,8 @@ def execute_sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, ov
     ex, owned = _sweep_executor(executor, scheduler, connect_timeout)
     try:
         one_body = loaded.may_run_one_body  # compiled once, before any worker starts
-        ensure_compiled(say=log, one_body=one_body, sign_law=one_body, chain=loaded.may_run_tree)
+        ensure_compiled(say=log, one_body=one_body, sign_law=one_body, chain=loaded.may_run_tree,
+                        solve_ivp=loaded.may_run_scipy(options.get("engine")))
         return run_sweep(loaded, output, executor=ex, jobs=jobs, log=log, **options)
     finally:
         if owned:

@@ -348,6 +348,12 @@ class Chain:
     gravity: np.ndarray
 
     @property
+    def sign_law(self) -> bool:
+        """Whether a joint is ``sliding`` with the pure sign law (``boundary_layer`` 0): its
+        runs go to the event-driven integrator (:mod:`rbstab.engine.switching`)."""
+        return any(j.variant == "sliding" and not j.boundary_layer for j in self.joints)
+
+    @property
     def size(self) -> int:
         """The number of bodies (= joints)."""
         return len(self.bodies)

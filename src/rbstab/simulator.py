@@ -318,7 +318,7 @@ def uses_compiled_engine(config, engine: str = DEFAULT_ENGINE) -> bool:
 
 def is_sign_law(config) -> bool:
     """Whether ``config`` is the pure sign law of ``sliding`` (``boundary_layer`` 0) of one body."""
-    return any(j.variant == "sliding" and not j.boundary_layer for j in config.chain.joints)
+    return config.chain.sign_law
 
 
 def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunResult:

@@ -24,9 +24,13 @@ from ..summary import numerical_rate, pressure_samples, warm_up_balance
 from ..variants import chain as C
 from ..variants.base import N_OUTPUTS
 from ..variants.paper import has_paper_form
-from ..variants.tree import reaction_samples, tree_layout
+from ..variants.disturbances import next_breakpoint
+from ..variants.tree import (range_margin, reaction_samples, reduce_state, tree_expand, tree_impulses, tree_layout,
+                             tree_rate, tree_work)
 from ..variants.kernels import PERMANENT, STATE_SIZE, body_pressures, run_outputs, state_rates
 from .integrate import admissible, integrate_chain_runs, integrate_runs
+from .registry import DEFAULT_ENGINE, get_engine
+from .status import RANGE_LEFT
 from .switching import warm_up as warm_up_sign_law
 from .systems import tree_system
 from .tableaus import METHODS
@@ -38,14 +42,15 @@ __all__ = ["GROUPS", "warm_up", "ensure_compiled", "kernel_groups"]
 #: sign law's event-driven integrator, which only pure-sign-law runs need; a tree's
 #: driver and outputs, which only trees of other shapes need; what an analysis of one
 #: body adds (the tree's rest state and its rates at many states), which the chain group
-#: also compiles. Both run groups share the summary's kernels (parts of :func:`warm_up`).
+#: also compiles; what scipy's methods call (``--engine scipy``, the implicit methods), which
+#: only their runs need. Both run groups share the summary's kernels (parts of :func:`warm_up`).
 GROUPS = {"engine": ("rates", "outputs", "summary"), "sign_law": ("switching",), "chain": ("driver", "chains", "summary"),
-          "analysis": ("rest",)}
+          "analysis": ("rest",), "solve_ivp": ("solve_ivp",)}
 #: Cold compile time of each part of :func:`warm_up` relative to the others (one core: rates
 #: ~60 s, outputs ~15 s, summary ~8 s, the sign law ~22 s, a tree's driver ~95 s, its
-#: outputs and rest state ~55 s, rest ~35 s), by which :func:`ensure_compiled` shares them
-#: between its two processes.
-WEIGHTS = {"rates": 6, "outputs": 2, "summary": 1, "switching": 2, "driver": 10, "chains": 6, "rest": 3}
+#: outputs and rest state ~55 s, rest ~35 s, scipy's methods' ~30 s), by which
+#: :func:`ensure_compiled` shares them between its two processes.
+WEIGHTS = {"rates": 6, "outputs": 2, "summary": 1, "switching": 2, "driver": 10, "chains": 6, "rest": 3, "solve_ivp": 3}
 
 
 def _tree_example():
@@ -100,6 +105,23 @@ def _warm_up_chains() -> None:
     _warm_up_states(compiled, y[None])
 
 
+def _warm_up_solve_ivp() -> None:
+    """What scipy's methods call on a tree's reduced rate from Python
+    (:func:`rbstab.simulator.solve_tree`: ``--engine scipy``, the implicit methods), for one
+    body and trees alike: its scratch arrays, rate, impulses, maximal image, ranges and the
+    disturbances' breakpoints."""
+    compiled = C.compile_chain(_tree_example(), offset=0.0)
+    layout = tree_layout(compiled)
+    tree, n = (*compiled.args, *layout.args), compiled.size
+    yr = reduce_state(compiled, layout, C._place(compiled, np.zeros(compiled.n_states)))
+    work = tree_work(n, compiled.n_states)
+    tree_rate(0.0, yr, *tree, np.empty(layout.n_r), work)
+    tree_impulses(0.0, yr, *tree, work)
+    tree_expand(yr, *tree, np.empty(compiled.n_states), np.empty((n, 3, 3)), np.empty((n, 3, 3)), True)
+    range_margin(yr, compiled.params, compiled.codes, layout.r_at, np.inf, 0, RANGE_LEFT)
+    next_breakpoint(compiled.params[0], 0.0, 1.0)
+
+
 def _warm_up_rest() -> None:
     """What an analysis of one body compiles beyond a run's kernels: the rest state of a
     one-body tree under gravity (:func:`rbstab.variants.chain.rest_state`: the potential, its
@@ -125,7 +147,7 @@ def _warm_up_paper_permanent() -> None:
         integrate_chain_runs(tree_system(compiled), y0[None], settings, method="DOP853", n_samples=2)
 
 
-def warm_up(parts: str = "rates,outputs,summary,switching,driver,chains,rest") -> None:
+def warm_up(parts: str = "rates,outputs,summary,switching,driver,chains,rest,solve_ivp") -> None:
     """Compile (or load from the cache) every kernel a run uses, on a tiny input.
 
     ``parts``: comma-separated, any of ``rates`` (one body's right-hand side and the
@@ -135,8 +157,8 @@ def warm_up(parts: str = "rates,outputs,summary,switching,driver,chains,rest") -
     :func:`rbstab.summary.warm_up_balance`), ``switching`` (the sign law's event-driven
     integrator, :mod:`rbstab.engine.switching`), ``driver`` (a tree's rate on the compiled
     driver, :mod:`rbstab.engine.systems`), ``chains`` (a tree's h, outputs and rates at a
-    stack of states) and ``rest`` (an analysis's: a tree's rest state and its rates at a
-    stack of states);
+    stack of states), ``rest`` (an analysis's: a tree's rest state and its rates at a
+    stack of states) and ``solve_ivp`` (what scipy's methods call, :func:`_warm_up_solve_ivp`);
     :func:`ensure_compiled` compiles some in a second process at the same time.
     """
     wanted = set(parts.split(","))
@@ -152,6 +174,8 @@ def warm_up(parts: str = "rates,outputs,summary,switching,driver,chains,rest") -
         _warm_up_chains()
     if "rest" in wanted:
         _warm_up_rest()
+    if "solve_ivp" in wanted:
+        _warm_up_solve_ivp()
     for code, n in enumerate(STATE_SIZE):
         y = np.zeros((1, n))
         if "rates" in wanted:
@@ -186,17 +210,20 @@ def _start_warm_up(parts: str):
         return None
 
 
-def kernel_groups(configs) -> dict[str, bool]:
-    """Which run kernels validated configurations (:class:`rbstab.config.RunConfig`) need,
-    as :func:`ensure_compiled`'s ``one_body`` and ``chain``: the paper's one body's for a
-    model that is one body held to the ground at its own point
-    (:func:`rbstab.variants.paper.has_paper_form`, either spelling), a tree's for any other."""
+def kernel_groups(configs, engine: str = DEFAULT_ENGINE) -> dict[str, bool]:
+    """Which run kernels validated configurations (:class:`rbstab.config.RunConfig`) need on
+    ``engine`` (:data:`rbstab.engine.ENGINES`), as :func:`ensure_compiled`'s ``one_body``,
+    ``chain`` and ``solve_ivp``: the paper's one body's for a model that is one body held to the
+    ground at its own point (:func:`rbstab.variants.paper.has_paper_form`, either spelling),
+    a tree's for any other; scipy's methods' for a run the engine does not integrate (its
+    method, or the engine ``scipy``) but the pure sign law's (its own integrator)."""
     paper = [has_paper_form(c.chain) for c in configs]
-    return {"one_body": any(paper), "chain": not all(paper)}
+    solve_ivp = any(not c.chain.sign_law and not get_engine(engine).takes(c.simulation.method) for c in configs)
+    return {"one_body": any(paper), "chain": not all(paper), "solve_ivp": solve_ivp}
 
 
 def ensure_compiled(say=None, *, one_body: bool = True, sign_law: bool = False, chain: bool = False,
-                    analysis: bool = False) -> None:
+                    analysis: bool = False, solve_ivp: bool = False) -> None:
     """Compile the engine's kernels into the cache unless that was done before.
 
     ``say``: called with one line (str) before a cold compile, e.g. ``click.echo`` to
@@ -204,10 +231,12 @@ def ensure_compiled(say=None, *, one_body: bool = True, sign_law: bool = False, 
     kernels (a configuration whose model is one body held to the ground at its own point,
     :func:`rbstab.variants.paper.has_paper_form`); ``sign_law``: the sign law's integrator;
     ``chain``: a tree's kernels (any other model); ``analysis``: what an analysis adds (its
-    rest state, :data:`GROUPS`; a tree's kernels include them). The parts are compiled in two
+    rest state, :data:`GROUPS`; a tree's kernels include them); ``solve_ivp``: what scipy's
+    methods call (:func:`_warm_up_solve_ivp`). The parts are compiled in two
     processes at once (numba compiles on one core; each writes its own kernels into the cache folder).
     """
-    wanted = {"engine": one_body, "sign_law": sign_law, "chain": chain, "analysis": analysis and not chain}
+    wanted = {"engine": one_body, "sign_law": sign_law, "chain": chain, "analysis": analysis and not chain,
+              "solve_ivp": solve_ivp}
     cold = [g for g, want in wanted.items() if want and not cache_is_warm(g)]
     if not cold:
         return

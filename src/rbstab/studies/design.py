@@ -509,7 +509,8 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
     spec = spec_from_mapping(mapping)
     members = members_of(base)
     one_body = spec.may_run_one_body
-    ensure_compiled(say=log, one_body=one_body, sign_law=one_body, chain=spec.may_run_tree)
+    ensure_compiled(say=log, one_body=one_body, sign_law=one_body, chain=spec.may_run_tree,
+                    solve_ivp=spec.may_run_scipy(engine))
     run_sweep(spec, folder.parent, executor=executor or "local", jobs=jobs, scheduler=scheduler, log=log,
               engine=engine, store=store,
               progress=progress, command_line=command_line)

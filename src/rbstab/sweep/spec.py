@@ -73,9 +73,10 @@ import numpy as np
 
 from ..config import ConfigError, apply_overrides, parse_yaml as parse
 from ..config.paths import KeyPathError, parse_any_key, parse_key, schema_of
-from ..config.schema import ChainSchema
+from ..config.schema import ChainSchema, SimulationSettings
 from ..config.schema import kind_of as _kind
 from ..config.yaml_io import copy_tree, read_yaml_file
+from ..engine.registry import get_engine
 from ..layout import is_chain
 from ..results import plain
 from .schema import DEFAULT_LYAPUNOV_RATIO, DISTRIBUTIONS, SweepSchema, SweepSpecError, validate_spec
@@ -296,6 +297,17 @@ class SweepSpec:
             if not has_paper_form(config.chain):
                 return True
         return False
+
+    def may_run_scipy(self, engine: str | None = None) -> bool:
+        """Whether a run may go to scipy's methods on ``engine`` (its name, default the
+        compiled one; :meth:`rbstab.engine.Engine.takes`): the engine ``scipy``, a base's
+        method the engine leaves out, or ``simulation.method`` varied; so that their kernels
+        are compiled before the workers start (:func:`rbstab.engine.ensure_compiled`)."""
+        taken = get_engine(engine)
+        if "simulation.method" in self.varied_keys:
+            return True
+        return any(not taken.takes((b.data.get("simulation") or {}).get("method", SimulationSettings.method))
+                   for b in self.bases)
 
     @property
     def varied_keys(self) -> list[str]:
