@@ -40,7 +40,7 @@ def pytest_configure(config):
 
 
 def pytest_sessionstart(session):
-    """Compile the engine's kernels (the engine, the sign law, chains) into the cache once,
+    """Compile the engine's kernels (the engine, the sign law, chains, scipy's methods') into the cache once,
     before any test (and before pytest-xdist starts its workers, which then load them
     instead of each compiling them again); then start the CUDA simulator's scripts the
     session's tests read, in processes of their own, so that no worker waits for them."""
@@ -48,7 +48,7 @@ def pytest_sessionstart(session):
         return
     from rbstab.engine import ensure_compiled
 
-    ensure_compiled(sign_law=True, chain=True)
+    ensure_compiled(sign_law=True, chain=True, solve_ivp=True)
     _start_simulated(session.config)
 
 
