@@ -384,7 +384,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     out = Path(output)
     if not overwrite:
         _check_targets(loaded, out)
-    ensure_compiled(say=console.info, **kernel_groups(loaded), analysis=True)
+    ensure_compiled(say=console.info, **kernel_groups(loaded, engine), analysis=True)
     for config in loaded:
         try:
             result = run_analysis(config, boundary_layer=boundary_layer, certificate=not no_certificate,

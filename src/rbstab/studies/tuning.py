@@ -571,7 +571,7 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
         "constraints": json.dumps([str(c) for c in problem.constraints]),
         "vary": json.dumps(vary_mapping(problem.varied)), "config": dump_yaml(problem.base.resolved)},
         overwrite=overwrite)
-    groups = kernel_groups([config])
+    groups = kernel_groups([config], engine or DEFAULT_ENGINE)
     ensure_compiled(say=log, **groups, sign_law=groups["one_body"])
     _check_scalar_metrics(problem, nominal_figures(config, engine))
     name = folder.name
