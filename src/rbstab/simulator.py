@@ -317,7 +317,8 @@ def uses_compiled_engine(config, engine: str = DEFAULT_ENGINE) -> bool:
 
 
 def is_sign_law(config) -> bool:
-    """Whether ``config`` is the pure sign law of ``sliding`` (``boundary_layer`` 0) of one body."""
+    """Whether ``config`` has the pure sign law of ``sliding`` (``boundary_layer`` 0):
+    :attr:`rbstab.chain.Chain.sign_law` of its model."""
     return config.chain.sign_law
 
 
@@ -606,7 +607,8 @@ def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, st
     grounded = held and bool(np.any(structure.chain.gravity))
     pressure = traces and full and tree  # the centres of pressure as outputs
     trees = [compiled[i] for i in first]
-    paper = all(t.one_body for t in trees)  # one joint to the ground: its centre of pressure the net one's
+    # the paper's pinned body (one joint to the ground): its centre of pressure is its net one
+    paper = held and pressure and all(t.one_body for t in trees)
     if (traces and full and structure.hinged) or (held and pressure and not paper):
         _reactions(structure, trees, index, time, states, outputs)
     elif held and pressure:  # the paper's pinned body: body_pressure's point (C.evaluate's), as one body's spelling
