@@ -220,9 +220,9 @@ def is_index(part: str) -> bool:
 def is_chain(data: Any) -> bool:
     """Whether a configuration is in a chain's spelling (``bodies`` and ``joints`` instead of
     ``body`` and ``controller``): a mapping with ``bodies`` and no ``body``, or a validated
-    configuration (:class:`rbstab.config.RunConfig`, :class:`rbstab.config.RunConfig`)
-    of such a mapping. The one test of a configuration's spelling: the model is the same
-    (a one-body config is its one-body tree, :func:`rbstab.config.chain_of`)."""
+    configuration (:class:`rbstab.config.RunConfig`) of such a mapping. The one test of a
+    configuration's spelling: the model is the same (a one-body config is its one-body tree,
+    :func:`rbstab.config.loader.tree_resolved`)."""
     data = getattr(data, "resolved", data)
     return isinstance(data, Mapping) and "bodies" in data and "body" not in data
 

@@ -157,7 +157,7 @@ class Pushes:
     ----------
     equilibrium : ndarray, shape (n_states,)
         Where every run starts (before the push): the bodies at rest, as the maximal state of
-        the tree (one body: of its one-body chain, :func:`rbstab.config.loader.chain_of`).
+        the tree (one body: of its one-body tree, :attr:`rbstab.config.RunConfig.chain`).
     config : RunConfig
         The pushed configuration (its initial state at rest, the push one more impulse).
 

@@ -48,7 +48,6 @@ violates its constraint is an error that says by how much.
 from __future__ import annotations
 
 import copy
-import dataclasses
 import math
 import warnings
 from collections.abc import Mapping, Sequence
@@ -59,10 +58,10 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from ..chain import GROUND, Body, Chain, Joint, Passive, Region, Stop, hinge, single, slide, universal
+from ..chain import GROUND, Body, Chain, Joint, Passive, Region, Stop, hinge, slide, universal
 from ..kinematics import axis_rotation, euler_angles_of, rotation_matrix, universal_columns, universal_rotation
 from ..layout import AXES, JOINT_CODES, is_chain, point_fixed
-from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
+from ..model import Disturbance, Limits, Saturation
 from ..variants import VARIANTS
 from ..variants.paper import has_paper_form
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
@@ -88,17 +87,19 @@ from .schema import (
     short_repr,
     within_range,
 )
-from .yaml_io import dump_yaml, dump_yaml_sections, read_yaml_file
+from .yaml_io import dump_yaml_sections, read_yaml_file
 
 __all__ = ["RunConfig", "config_from_mapping", "load_config",
-           "PER_RUN_SECTIONS", "limits_of", "simulation_settings", "resolved_simulation", "ONE_BODY_NAMES",
+           "PER_RUN_SECTIONS", "limits_of", "resolved_simulation", "ONE_BODY_NAMES",
            "CONSTRAINT_TOLERANCE", "initial_state_fits", "placed_initial_state", "tree_resolved", "tree_keys"]
 
 #: Top-level sections in which most runs of a sweep differ (:meth:`RunConfig.to_yaml` does
 #: not cache their YAML).
 PER_RUN_SECTIONS = ("name", "initial_state")
 #: The sections that :meth:`RunConfig.from_resolved` compares to share a rebuilt config's objects.
-_SHARED_SECTIONS = ("body", "controller", "simulation", "disturbances")
+#: By whether the mapping is in one body's spelling.
+_SHARED_SECTIONS = {True: ("body", "controller", "simulation", "disturbances"),
+                    False: ("gravity", "bodies", "joints", "simulation", "disturbances")}
 #: The names of the body and the joint of a one-body config's tree (its sections' names).
 ONE_BODY_NAMES = ("body", "controller")
 #: How far [m, m/s] a ``permanent`` joint's given initial state may miss its constraint
@@ -176,81 +177,60 @@ class RunConfig:
             For an invalid section or name.
         """
         data = {**self.resolved, "name": self.name if name is None else name, "initial_state": initial_state}
-        build = _build_tree if is_chain(data) else _build
-        return build(data, default_name=None, source=source)
+        return _build(data, default_name=None, source=source)
 
     @classmethod
     def from_resolved(cls, resolved: Mapping, *, like: Sequence["RunConfig"] = ()) -> "RunConfig":
-        """Rebuild the RunConfig of a one-body ``resolved`` mapping without validating it again.
+        """Rebuild the RunConfig of a ``resolved`` mapping (either spelling) without validating it again.
 
         For a mapping that a validated RunConfig gave (``config.resolved``, e.g. a sweep's
         planned run sent to a worker): "validate once, at the boundary". It gives what
-        :func:`config_from_mapping` gives, without the warnings, in a few microseconds.
+        :func:`config_from_mapping` gives, without the warnings, in tens of microseconds for
+        one body (its tree placed for a tree's spelling).
 
         ``like``: other rebuilt configs (a sweep's runs before this one). The new config
         shares the ``chain`` and ``simulation`` objects of the first of them with the same
-        ``body``, ``controller``, ``simulation`` and ``disturbances`` sections, so that runs
-        that differ only in name and initial state share one model
-        (:func:`rbstab.simulator.simulate_many`). "The same" is Python's ``==``: sections
-        that differ only in the sign of a zero (-0.0 == 0.0) count as the same.
+        model and ``simulation`` sections (one body's ``body``, ``controller``; a tree's
+        ``gravity``, ``bodies``, ``joints``; ``disturbances``), so that runs that differ only
+        in name and initial state share one model (:func:`rbstab.simulator.simulate_many`).
+        "The same" is Python's ``==``: sections that differ only in the sign of a zero
+        (-0.0 == 0.0) count as the same.
 
         Raises
         ------
-        KeyError, TypeError, ValueError
+        KeyError, TypeError, ValueError, ConfigError
             For a mapping of another shape (validate it with :func:`config_from_mapping`).
         """
-        initial_state = {ONE_BODY_NAMES[0]: {block: _array(resolved["initial_state"][key])
-                                             for key, block in INITIAL_STATE_BLOCKS.items()}}
-        for other in like:
-            if all(resolved.get(key) == other.resolved.get(key) for key in _SHARED_SECTIONS):
-                return dataclasses.replace(other, name=resolved["name"], initial_state=initial_state,
-                                           resolved=resolved, warnings=())
-        ctrl, body, sim = resolved["controller"], resolved["body"], resolved["simulation"]
-        used = VARIANTS[ctrl["variant"]].required_gains
-        gains = Gains(
-            **{g: _matrix(ctrl[g]) for g in GAIN_NAMES if g in used},
-            k_s=float(ctrl["k_s"]) if "k_s" in used else None,
-            boundary_layer=float(ctrl.get("boundary_layer", 0.0)) if "k_s" in used else 0.0,
-            saturation=saturation_of(ctrl.get("saturation")),
-            disturbances=disturbances_of(resolved.get("disturbances")),
-        )
-        max_step = sim["max_step"]
-        wall = sim.get("max_wall_time", SimulationSettings.max_wall_time)  # absent in files of rbstab < 0.2
-        rigid = RigidBody(float(body["mass"]), _matrix(body["inertia"]), _array(body["attachment_point"]),
-                          _array(body["gravity"]))
-        return cls(
-            name=resolved["name"],
-            chain=_one_body_chain(rigid, gains, ctrl["variant"]),
-            initial_state=initial_state,
-            simulation=SimulationSettings(
-                t_end=float(sim["t_end"]), n_samples=int(sim["n_samples"]), method=sim["method"],
-                rtol=float(sim["rtol"]), atol=float(sim["atol"]),
-                max_step=math.inf if max_step is None else float(max_step), gimbal_margin=float(sim["gimbal_margin"]),
-                max_steps=int(sim.get("max_steps", SimulationSettings.max_steps)),
-                max_wall_time=math.inf if wall is None else float(wall),
-                limits=limits_of(sim.get("limits")),
-            ),
-            resolved=resolved,
-        )
+        one_body = not is_chain(resolved)
+        shared = _SHARED_SECTIONS[one_body]
+        other = next((c for c in like if all(resolved.get(k) == c.resolved.get(k) for k in shared)), None)
+        chain = _chain(_tree_of(resolved) if one_body else resolved) if other is None else other.chain
+        simulation = _settings(resolved["simulation"]) if other is None else other.simulation
+        if one_body:
+            states, placed = _written_state(resolved), ()
+        else:
+            states, placed, _ = _place_tree(resolved["initial_state"], chain, simulation.gimbal_margin, None, ())
+        return cls(name=resolved["name"], chain=chain, initial_state=states, placed=placed, simulation=simulation,
+                   resolved=resolved)
 
 
-def _one_body_chain(body: RigidBody, gains: Gains, variant: str) -> Chain:
-    """The one-body tree of a one-body configuration (:class:`RunConfig`): ``body`` (named
-    ``body``) with K_t, L_t and the limits of H, held by its joint (named ``controller``) at
-    C = R to the ground point R with the ``variant``'s law, K_r, L_r, point gains and the
-    limits of N and Lambda; the disturbances on the body."""
-    sat = gains.saturation
-    tree_body = Body(
-        name=ONE_BODY_NAMES[0], mass=body.mass, inertia=body.inertia, k_t=gains.k_t, l_t=gains.l_t,
-        saturation=None if sat is None else Saturation(_INF3.copy(), sat.force_h, _INF3.copy(), sat.shape),
-        disturbances=gains.disturbances)
-    joint = Joint(
-        name=ONE_BODY_NAMES[1], parent=GROUND, child=0, parent_point=body.attachment_point,
-        child_point=body.attachment_point, variant=variant, k_r=gains.k_r, l_r=gains.l_r,
-        k_c=gains.k_c, l_c=gains.l_c, k_d=gains.k_d, l_d=gains.l_d, k_s=gains.k_s,
-        boundary_layer=gains.boundary_layer,
-        saturation=None if sat is None else Saturation(sat.torque_n, _INF3.copy(), sat.constraint_force, sat.shape))
-    return single(tree_body, joint, body.gravity)
+def _written_state(resolved: Mapping) -> dict[str, dict[str, np.ndarray]]:
+    """:attr:`RunConfig.initial_state` of a one-body resolved mapping: its blocks as written."""
+    written = resolved["initial_state"]
+    return {ONE_BODY_NAMES[0]: {block: _array(written[key]) for key, block in INITIAL_STATE_BLOCKS.items()}}
+
+
+def _settings(sim: Mapping) -> SimulationSettings:
+    """The :class:`SimulationSettings` of a resolved ``simulation`` section (:attr:`RunConfig.resolved`)."""
+    max_step = sim["max_step"]
+    wall = sim.get("max_wall_time", SimulationSettings.max_wall_time)  # absent in files of rbstab < 0.2
+    return SimulationSettings(
+        t_end=float(sim["t_end"]), n_samples=int(sim["n_samples"]), method=sim["method"],
+        rtol=float(sim["rtol"]), atol=float(sim["atol"]),
+        max_step=math.inf if max_step is None else float(max_step), gimbal_margin=float(sim["gimbal_margin"]),
+        max_steps=int(sim.get("max_steps", SimulationSettings.max_steps)),
+        max_wall_time=math.inf if wall is None else float(wall),
+        limits=limits_of(sim.get("limits")))
 
 
 def tree_resolved(resolved: Mapping) -> dict:
@@ -259,15 +239,21 @@ def tree_resolved(resolved: Mapping) -> dict:
     one-body tree (:class:`RunConfig`), the body ``body`` with K_t, L_t and the limit of H,
     held at R to the ground point R by the joint ``controller`` with the law, the other gains
     and the limits of N and Lambda; a ``permanent`` joint's child's x and v left to be placed.
-    ``config_from_mapping`` of it is the same tree. Not modified.
+    ``config_from_mapping`` of it is the same tree. Not modified; shares nothing with it.
 
     Raises
     ------
     KeyError
         For a mapping without the one-body sections (``body``, ``controller``,
         ``initial_state``): validate it with :func:`config_from_mapping` first."""
-    r = copy.deepcopy(dict(resolved))
-    body, controller, state = r.pop("body"), r.pop("controller"), r.pop("initial_state")
+    return copy.deepcopy(_tree_of(resolved))
+
+
+def _tree_of(resolved: Mapping) -> dict:
+    """:func:`tree_resolved` sharing the values (lists, numbers) of ``resolved``, which it
+    does not modify: what the chain is built from (:func:`_chain`)."""
+    r = dict(resolved)
+    body, controller, state = dict(r.pop("body")), dict(r.pop("controller")), r.pop("initial_state")
     point = body.pop("attachment_point")
     r["gravity"] = body.pop("gravity")
     sat = controller.pop("saturation", None)
@@ -284,8 +270,8 @@ def tree_resolved(resolved: Mapping) -> dict:
     if point_fixed(controller["variant"]):
         state = {k: state[k] for k in ("theta", "omega")}
     r.update(bodies=[tree_body], joints=[joint], initial_state={ONE_BODY_NAMES[0]: state})
-    for d in r.get("disturbances") or ():
-        d["body"] = ONE_BODY_NAMES[0]
+    if r.get("disturbances"):
+        r["disturbances"] = [{**d, "body": ONE_BODY_NAMES[0]} for d in r["disturbances"]]
     return r
 
 
@@ -371,64 +357,6 @@ def _matrix(value: Any) -> np.ndarray:
         out = np.diag(out)
     out.setflags(write=False)
     return out
-
-
-def _build(
-    data: Any,
-    *,
-    default_name: str | None,
-    source: str | None,
-    overrides: Sequence[str] = (),
-) -> RunConfig:
-    if not isinstance(data, Mapping):
-        what = "the configuration is empty" if data is None else f"top level: found {short_repr(data)}"
-        raise ConfigError([f"{what}; expected {TOP_LEVEL}"], source)
-    if "bodies" in data:
-        raise ConfigError([_BOTH], source)
-    run = _validated(plain_tree(data), default_name, source, overrides)
-    ctrl = run.controller
-    dump = run.model_dump()
-    dump["controller"] = {k: v for k, v in dump["controller"].items() if v is not None}
-    if dump.get("disturbances") is None:
-        dump.pop("disturbances", None)  # a run without: its resolved form as before
-    else:
-        dump["disturbances"] = [{k: v for k, v in d.items() if v is not None} for d in dump["disturbances"]]
-    resolved_simulation(dump["simulation"], run.simulation)
-    config = RunConfig.from_resolved(dump)  # dump: plain dicts, lists, str, numbers (new lists; tested)
-    chain = config.chain
-    body, joint = chain.bodies[0], chain.joints[0]
-    used = VARIANTS[ctrl.variant].required_gains
-    used_gains = {g: getattr(body if g in ("k_t", "l_t") else joint, g) for g in (*GAIN_NAMES, "k_s") if g in used}
-    _check_weight(ctrl, body.mass, chain.gravity, used_gains, joint.boundary_layer, source, overrides)
-    limits = config.simulation.limits
-    if limits is not None:  # the state as a tree places it: a permanent body's x, v from its pin
-        given = {key: getattr(run.initial_state, key) for key in INITIAL_STATE_BLOCKS
-                 if not (point_fixed(ctrl.variant) and key in ("x", "v"))}
-        states, _, errors = _place_tree({ONE_BODY_NAMES[0]: given}, chain, config.simulation.gimbal_margin, source,
-                                        overrides)
-        _check_limits(chain, states, errors, limits, run.simulation.limits.model_dump(), source, overrides,
-                      one_body=True)
-    definite = VARIANTS[ctrl.variant].definite_gains or tuple(used_gains)
-    as_written = {g: getattr(ctrl, g) for g in used_gains if g in definite}  # 3 numbers: no numpy needed
-    found_warnings = _notes(chain, ["body.inertia"], [("initial_state.theta", run.initial_state.theta)],
-                            [("controller.", as_written)], source)
-    return dataclasses.replace(config, warnings=found_warnings)
-
-
-def simulation_settings(sim) -> SimulationSettings:
-    """The :class:`SimulationSettings` of a validated ``simulation`` section (the schema's model)."""
-    return SimulationSettings(
-        t_end=float(sim.t_end),
-        n_samples=sim.n_samples,
-        method=sim.method,
-        rtol=float(sim.rtol),
-        atol=float(sim.atol),
-        max_step=float(sim.max_step),
-        gimbal_margin=float(sim.gimbal_margin),
-        max_steps=int(sim.max_steps),
-        max_wall_time=float(sim.max_wall_time),
-        limits=limits_of(None if sim.limits is None else sim.limits.model_dump()),
-    )
 
 
 def resolved_simulation(dump: dict, sim) -> None:
@@ -526,8 +454,7 @@ def config_from_mapping(
     """
     if overrides and isinstance(data, Mapping):
         data = apply_overrides(data, overrides)
-    build = _build_tree if is_chain(data) else _build
-    return build(data, default_name=default_name, source=source, overrides=overrides)
+    return _build(data, default_name=default_name, source=source, overrides=overrides)
 
 
 def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig:
@@ -562,8 +489,7 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig:
             data = apply_overrides(data, overrides)
     except ConfigError as exc:
         raise ConfigError(exc.errors, source) from None
-    build = _build_tree if is_chain(data) else _build
-    return build(data, default_name=path.stem, source=source, overrides=overrides)
+    return _build(data, default_name=path.stem, source=source, overrides=overrides)
 
 
 # -- a tree's spelling (bodies, joints) ---------------------------------------------------------
@@ -613,64 +539,63 @@ def _gain(value: Any) -> np.ndarray:
     return _matrix(np.zeros(3) if value is None else value)
 
 
-def _saturation(section: Any, keys: Sequence[str]) -> Saturation | None:
+def _saturation(section: Mapping | None, keys: Sequence[str]) -> Saturation | None:
     if section is None:
         return None
-    return saturation_of({k: getattr(section, k) for k in keys} | {"shape": section.shape})
+    return saturation_of({k: section.get(k) for k in keys} | {"shape": section.get("shape", "clip")})
 
 
-def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
-    names = [b.name for b in run.bodies]
+def _chain(tree: Mapping) -> Chain:
+    """The :class:`Chain` of a resolved configuration in a tree's spelling (``gravity``,
+    ``bodies``, ``joints``, ``disturbances``: validated, as :attr:`RunConfig.resolved` holds
+    them, None values left out; one body's through :func:`_tree_of`): the one place a
+    configuration's model is built."""
+    names = [b["name"] for b in tree["bodies"]]
     index = {name: i for i, name in enumerate(names)}
-    model_disturbances = disturbances_of(disturbances)
+    entries = tree.get("disturbances") or ()
+    model_disturbances = disturbances_of(entries)
     bodies = tuple(
-        Body(name=b.name, mass=float(b.mass), inertia=_matrix(b.inertia), k_t=_gain(b.k_t), l_t=_gain(b.l_t),
-             saturation=_saturation(b.saturation, ("force_h",)),
-             disturbances=tuple(d for d, entry in zip(model_disturbances, disturbances)
-                                if entry.get("body", names[0]) == b.name))
-        for b in run.bodies)
+        Body(name=b["name"], mass=float(b["mass"]), inertia=_matrix(b["inertia"]), k_t=_gain(b.get("k_t")),
+             l_t=_gain(b.get("l_t")), saturation=_saturation(b.get("saturation"), ("force_h",)),
+             disturbances=tuple(d for d, entry in zip(model_disturbances, entries)
+                                if entry.get("body", names[0]) == b["name"]))
+        for b in tree["bodies"])
     joints = []
-    for j in sorted(run.joints, key=lambda j: index[j.child]):
-        parent = GROUND if j.parent == GROUND_NAME else index[j.parent]
-        if j.variant in ("hinge", "slide"):  # one coordinate: a turn about the axis, or a translation along it
-            sat, passive = j.saturation, j.passive
-            upper = math.inf if sat is None or sat.torque_n is None else float(sat.torque_n)
-            lower = -upper if sat is None or sat.torque_n_lower is None else float(sat.torque_n_lower)
-            joints.append((hinge if j.variant == "hinge" else slide)(
-                j.name, parent, index[j.child], _array(j.parent_point), _array(j.child_point), _array(j.axis),
-                float(j.k_r or 0.0), float(j.l_r or 0.0), float(j.theta_ref or 0.0),
-                None if sat is None else (lower, upper), "clip" if sat is None else sat.shape,
-                None if passive is None else (float(passive.k_r or 0.0), float(passive.l_r or 0.0),
-                                              float(passive.theta_ref or 0.0)),
-                _stop(j.range, None), _region(j.range, None)))
+    for j in sorted(tree["joints"], key=lambda j: index[j["child"]]):
+        parent = GROUND if j["parent"] == GROUND_NAME else index[j["parent"]]
+        variant, sat, passive, written = j["variant"], j.get("saturation"), j.get("passive"), j.get("range")
+        if variant in AXES_VARIANTS:  # one coordinate a turn about an axis or a translation along it; two turns
+            upper = math.inf if sat is None or sat.get("torque_n") is None else sat["torque_n"]
+            lower = np.negative(upper) if sat is None or sat.get("torque_n_lower") is None else sat["torque_n_lower"]
+            gains = [j.get(key) or 0.0 for key in ("k_r", "l_r", "theta_ref")]
+            springs = None if passive is None else tuple(passive.get(key) or 0.0 for key in ("k_r", "l_r", "theta_ref"))
+            axes = 2 if variant == "universal" else None
+            if axes is None:  # a number each
+                upper, lower = float(upper), float(lower)
+                gains = [float(g) for g in gains]
+                springs = None if springs is None else tuple(float(g) for g in springs)
+            make = {"hinge": hinge, "slide": slide, "universal": universal}[variant]
+            joints.append(make(j["name"], parent, index[j["child"]], _array(j["parent_point"]),
+                               _array(j["child_point"]), _array(j["axis"]), *gains,
+                               None if sat is None else (lower, upper), "clip" if sat is None else sat["shape"],
+                               springs, _stop(written, axes), _region(written, axes)))
             continue
-        if j.variant == "universal":
-            sat, passive = j.saturation, j.passive
-            upper = math.inf if sat is None or sat.torque_n is None else sat.torque_n
-            lower = np.negative(upper) if sat is None or sat.torque_n_lower is None else sat.torque_n_lower
-            joints.append(universal(
-                j.name, parent, index[j.child], _array(j.parent_point), _array(j.child_point), _array(j.axis),
-                j.k_r or 0.0, j.l_r or 0.0, j.theta_ref or 0.0, None if sat is None else (lower, upper),
-                "clip" if sat is None else sat.shape,
-                None if passive is None else (passive.k_r or 0.0, passive.l_r or 0.0, passive.theta_ref or 0.0),
-                _stop(j.range, 2), _region(j.range, 2)))
-            continue
-        used = VARIANTS[j.variant].required_gains if j.variant in VARIANTS else ()  # a quaternion ball: no point law
+        used = VARIANTS[variant].required_gains if variant in VARIANTS else ()  # a quaternion ball: no point law
+        shape = 1 if variant == "ball" else 3
         joints.append(Joint(
-            name=j.name, parent=parent, child=index[j.child],
-            parent_point=_array(j.parent_point), child_point=_array(j.child_point), variant=j.variant,
-            k_r=_gain(j.k_r), l_r=_gain(j.l_r),
-            **{g: _matrix(getattr(j, g)) if g in used else None for g in ("k_c", "l_c", "k_d", "l_d")},
-            k_s=float(j.k_s) if "k_s" in used else None,
-            boundary_layer=float(j.boundary_layer) if "k_s" in used else 0.0,
-            saturation=_saturation(j.saturation, ("torque_n", "torque_n_lower", "constraint_force")),
-            theta_ref=np.zeros(3) if j.theta_ref is None else _array(j.theta_ref),
-            passive=None if j.passive is None else Passive(
-                k_r=_gain(j.passive.k_r), l_r=_gain(j.passive.l_r),
-                theta_ref=np.zeros(3) if j.passive.theta_ref is None else _array(j.passive.theta_ref)),
-            stop=_stop(j.range, 1 if j.variant == "ball" else 3),
-            region=_region(j.range, 1 if j.variant == "ball" else 3)))
-    return Chain(bodies=bodies, joints=tuple(joints), gravity=_array(run.gravity))
+            name=j["name"], parent=parent, child=index[j["child"]],
+            parent_point=_array(j["parent_point"]), child_point=_array(j["child_point"]), variant=variant,
+            k_r=_gain(j.get("k_r")), l_r=_gain(j.get("l_r")),
+            **{g: _matrix(j[g]) if g in used else None for g in ("k_c", "l_c", "k_d", "l_d")},
+            k_s=float(j["k_s"]) if "k_s" in used else None,
+            boundary_layer=float(j.get("boundary_layer", 0.0)) if "k_s" in used else 0.0,
+            saturation=_saturation(sat, ("torque_n", "torque_n_lower", "constraint_force")),
+            theta_ref=np.zeros(3) if j.get("theta_ref") is None else _array(j["theta_ref"]),
+            passive=None if passive is None else Passive(
+                k_r=_gain(passive.get("k_r")), l_r=_gain(passive.get("l_r")),
+                theta_ref=np.zeros(3) if passive.get("theta_ref") is None else _array(passive["theta_ref"])),
+            stop=_stop(written, shape), region=_region(written, shape)))
+    return Chain(bodies=bodies, joints=tuple(joints), gravity=_array(tree["gravity"]))
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -678,27 +603,20 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
-def _tree_initial_state(run: ChainSchema, chain: Chain, source: str | None,
-                   overrides: Sequence[str]) -> tuple[dict[str, dict[str, np.ndarray]], tuple[str, ...], list]:
-    """(each body's initial state, x and v placed where left out; the keys placed; each
-    joint's E_j [m]). ConfigError for a permanent joint whose given x or v misses its
-    constraint, or a joint's relative orientation at gimbal lock."""
-    written = {}
-    for body in chain.bodies:
-        section = run.initial_state.get(body.name)
-        written[body.name] = ({} if section is None else
-                              {key: getattr(section, key) for key in (*INITIAL_STATE_BLOCKS, *HINGE_STATE)
-                               if key in section.model_fields_set})
-    return _place_tree(written, chain, run.simulation.gimbal_margin, source, overrides)
-
-
 def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, source: str | None,
                 overrides: Sequence[str]) -> tuple[dict[str, dict[str, np.ndarray]], tuple[str, ...], list]:
-    """:func:`_tree_initial_state` of the blocks each body's config gives (``written``: by
-    body name, its initial_state keys as written, each (3,), a hinge's child's q and u numbers;
-    a block left out is zero, an x or v left out placed from the parent's; a hinge's child
-    turned by q about its axis from its parent, Omega = A_rel' Omega_p + a u; a slide's child
-    turned as its parent, its point at the parent's point moved by q a, moving at a u)."""
+    """(each body's initial state, x and v placed where left out; the keys placed; each joint's
+    E_j [m]) of the blocks each body's resolved ``initial_state`` gives (``written``: by body
+    name, its keys as written, each (3,), a hinge's child's q and u numbers): a block left out
+    is zero, an x or v left out placed from the parent's; a hinge's child turned by q about its
+    axis from its parent, Omega = A_rel' Omega_p + a u; a slide's child turned as its parent,
+    its point at the parent's point moved by q a, moving at a u.
+
+    Raises
+    ------
+    ConfigError
+        For a permanent joint whose given x or v misses its constraint, a joint that starts at
+        its gimbal lock or outside its range's admissible region."""
     states, placed, errors = {}, [], []
     written_of = [written.get(body.name) or {} for body in chain.bodies]
     given_of = [set(w) for w in written_of]
@@ -844,18 +762,20 @@ def _range_value(value: Any, shape: int | None, fill: float = 0.0) -> float | np
 
 def _stop(written, shape: int | None) -> Stop | None:
     """A hinge's (``shape`` None) or a ball's (3) ``range`` as a stop (``kind: stop``), else None."""
-    if written is None or written.kind != "stop":
+    if written is None or written.get("kind", "stop") != "stop":
         return None
-    return Stop(*(_range_value(v, shape, fill) for v, fill in ((written.lower, -math.inf), (written.upper, math.inf),
-                                                              (written.k_r, 0.0), (written.l_r or 0.0, 0.0))))
+    return Stop(*(_range_value(v, shape, fill) for v, fill in ((written.get("lower"), -math.inf),
+                                                              (written.get("upper"), math.inf),
+                                                              (written["k_r"], 0.0), (written.get("l_r") or 0.0, 0.0))))
 
 
 def _region(written, shape: int | None) -> Region | None:
     """A hinge's (``shape`` None) or a ball's (3) ``range`` as an admissible region (``kind:
     region``), else None."""
-    if written is None or written.kind != "region":
+    if written is None or written.get("kind", "stop") != "region":
         return None
-    return Region(_range_value(written.lower, shape, -math.inf), _range_value(written.upper, shape, math.inf))
+    return Region(_range_value(written.get("lower"), shape, -math.inf),
+                  _range_value(written.get("upper"), shape, math.inf))
 
 
 def _tree_resolved(run: ChainSchema) -> dict:
@@ -879,12 +799,7 @@ def _tree_resolved(run: ChainSchema) -> dict:
         states[body.name] = {k: v for k, v in written.items()
                              if k not in ("x", "v", *HINGE_STATE) or (state is not None and k in state.model_fields_set)}
     dump["initial_state"] = states
-    if dump.get("disturbances") is None:
-        dump.pop("disturbances", None)
-    else:
-        dump["disturbances"] = [{k: v for k, v in d.items() if v is not None} for d in dump["disturbances"]]
-    resolved_simulation(dump["simulation"], run.simulation)
-    return dump
+    return _resolved_sections(dump, run)
 
 
 def _notes(chain: Chain, inertia_keys: Sequence[str], angles: Sequence[tuple[str, Any]],
@@ -911,18 +826,60 @@ def _notes(chain: Chain, inertia_keys: Sequence[str], angles: Sequence[tuple[str
     return tuple(lines)
 
 
-def _build_tree(data: Any, *, default_name: str | None, source: str | None, overrides: Sequence[str] = ()) -> RunConfig:
+def _one_body_resolved(run: RunSchema) -> dict:
+    """The validated one-body configuration as plain Python (:attr:`RunConfig.resolved`): defaults
+    filled in, the gains and limits left out omitted, no ``disturbances`` or ``simulation.limits``
+    key without them."""
+    dump = run.model_dump()
+    dump["controller"] = {k: v for k, v in dump["controller"].items() if v is not None}
+    return _resolved_sections(dump, run)
+
+
+def _resolved_sections(dump: dict, run: RunSchema | ChainSchema) -> dict:
+    """``dump`` (``run``'s model_dump) with the sections either spelling resolves alike, in
+    place: no ``disturbances`` key without them, each one's unset keys left out, and
+    ``simulation`` as :func:`resolved_simulation` writes it."""
+    if dump.get("disturbances") is None:
+        dump.pop("disturbances", None)
+    else:
+        dump["disturbances"] = [{k: v for k, v in d.items() if v is not None} for d in dump["disturbances"]]
+    resolved_simulation(dump["simulation"], run.simulation)
+    return dump
+
+
+def _build(data: Any, *, default_name: str | None, source: str | None, overrides: Sequence[str] = ()) -> RunConfig:
+    """The one builder of a :class:`RunConfig`, either spelling: its schema (messages in the keys
+    written), the resolved mapping, the tree (:func:`_chain`), its placed initial state, limits and
+    notes."""
+    one_body = not is_chain(data)
     if not isinstance(data, Mapping):
         what = "the configuration is empty" if data is None else f"top level: found {short_repr(data)}"
-        raise ConfigError([f"{what}; expected {CHAIN_TOP_LEVEL}"], source)
-    run = _validated(plain_tree(data), default_name, source, overrides, schema=ChainSchema)
-    resolved = _tree_resolved(run)
-    chain = _chain(run, resolved.get("disturbances") or ())
-    _check_engine_scope(chain, resolved, source, overrides)
-    states, placed, errors = _tree_initial_state(run, chain, source, overrides)
-    simulation = simulation_settings(run.simulation)
-    _check_limits(chain, states, errors, simulation.limits, resolved["simulation"].get("limits") or {}, source,
-                  overrides)
+        raise ConfigError([f"{what}; expected {TOP_LEVEL if one_body else CHAIN_TOP_LEVEL}"], source)
+    if one_body and "bodies" in data:
+        raise ConfigError([_BOTH], source)
+    run = _validated(plain_tree(data), default_name, source, overrides, RunSchema if one_body else ChainSchema)
+    resolved = _one_body_resolved(run) if one_body else _tree_resolved(run)
+    tree = _tree_of(resolved) if one_body else resolved
+    chain = _chain(tree)
+    if one_body:
+        ctrl, body, joint = run.controller, chain.bodies[0], chain.joints[0]
+        used = VARIANTS[ctrl.variant].required_gains
+        used_gains = {g: getattr(body if g in BODY_GAINS else joint, g) for g in (*GAIN_NAMES, "k_s") if g in used}
+        _check_weight(ctrl, body.mass, chain.gravity, used_gains, joint.boundary_layer, source, overrides)
+    else:
+        _check_engine_scope(chain, resolved, source, overrides)
+    simulation = _settings(resolved["simulation"])
+    if not one_body or simulation.limits is not None:  # one body's x, v as written, or placed where point-fixed
+        states, placed, errors = _place_tree(tree["initial_state"], chain, simulation.gimbal_margin, source,
+                                             overrides)
+        _check_limits(chain, states, errors, simulation.limits, resolved["simulation"].get("limits") or {}, source,
+                      overrides, one_body=one_body)
+    if one_body:
+        definite = VARIANTS[ctrl.variant].definite_gains or tuple(used_gains)
+        notes = _notes(chain, ["body.inertia"], [("initial_state.theta", run.initial_state.theta)],
+                       [("controller.", {g: getattr(ctrl, g) for g in used_gains if g in definite})], source)
+        return RunConfig(name=run.name, chain=chain, initial_state=_written_state(resolved), simulation=simulation,
+                         resolved=resolved, warnings=notes)
     gains = [(f"bodies.{i}.", {g: getattr(b, g) for g in BODY_GAINS}) for i, b in enumerate(run.bodies)]
     gains += [(f"joints.{i}.", {g: getattr(j, g) for g in (*JOINT_GAINS, "k_s")
                                 if g in ("k_r", "l_r")

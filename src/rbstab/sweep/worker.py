@@ -55,7 +55,6 @@ from ..config.loader import config_from_mapping
 from ..engine.registry import get_engine
 from ..io.chunk import ChunkWriter, StoreRow, StoreRows, chunk_file_name
 from ..io.hdf5 import write_run
-from ..layout import is_chain
 from ..results import plain
 from ..simulator import simulate, simulate_batch, simulate_blocks, uses_compiled_engine
 from .folder import NOT_IN_INDEX, index_part, row_from_attributes
@@ -321,17 +320,13 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
     rebuilt without a second validation (:meth:`rbstab.config.RunConfig.from_resolved`,
     sharing the tree and settings of one of the last :data:`SHARED_CONFIGS` distinct
     configs where they are the same: a grid's inner axis); one that does not rebuild is
-    validated, for the message of what is wrong with it. A tree's run is validated again (a
-    chunk of them goes as columns, :func:`run_table_chunk`; these are the runs that do not).
+    validated, for the message of what is wrong with it.
     """
     configs: list = []
     errors: list[dict[str, Any]] = []
     recent: list = []  # distinct rebuilt configs, the latest first
     for task in tasks:
         try:
-            if is_chain(task.config):
-                configs.append(_config(task))
-                continue
             try:
                 config = RunConfig.from_resolved(task.config, like=recent)
                 if not recent or config.chain is not recent[0].chain:
