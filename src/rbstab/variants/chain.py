@@ -53,7 +53,7 @@ from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
 from .kernels import BALL, EMBEDDED, HINGE, PERMANENT, SLIDE, UNIVERSAL, body_pressures, constraint_dissipation, \
     constraint_energy, constraint_force, constraint_force_command, run_outputs, saturation_effects
 from .paper import body_model
-from .registry import record_offset
+from .registry import record_offsets
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "lyapunov", "rest_state", "rest_offset", "reference_posture", "records_of", "is_one_body", "one_body_mask", "papers_feedback", "gimbal_lock_message", "locked_part", "gimbal_part_name", "independent_coordinates", "full_state",
@@ -1256,8 +1256,9 @@ def rest_offset(compiled: CompiledChain) -> float:
     if (not np.any(compiled.chain.gravity) and not np.any(compiled.params["theta_ref"])
             and not np.any(compiled.params["passive_theta_ref"])):
         return 0.0
-    if compiled.one_body:  # the one-body model's own h, as its one-body spelling has it
-        return record_offset(compiled.params[0], compiled.chain.gravity, _VARIANT_NAMES[int(compiled.codes[0])])
+    if compiled.one_body:  # the paper's one body: h as a batch of its records computes it
+        name = _VARIANT_NAMES[int(compiled.codes[0])]
+        return float(record_offsets(compiled.params[:1], compiled.chain.gravity[None], name)[0])
     key = b"".join(np.ascontiguousarray(a).tobytes() for a in (_undisturbed(compiled.params), *compiled.args[1:],
                                                                  compiled.chain.gravity))
     if key not in _OFFSETS:  # the runs of a sweep over initial states share their chain's
