@@ -48,7 +48,6 @@ from .engine.switching import integrate_sign_law, sign_law_outputs, switching_me
 from .layout import LIMITED, OUTPUTS, QUANTITIES, SUMMARY_FIGURES, VARIANT_LAYOUTS, is_chain, summary_stride
 from .results import RunBlock, RunResult, row
 from .summary import numerical_rate, pressure_samples, summarize, tree_stream_table, tree_summary_table
-from .variants import Variant
 from .variants.paper import paper_form, paper_initial_state
 from .variants.disturbances import next_breakpoint
 

@@ -42,7 +42,6 @@ from .derivatives import jacobian
 
 __all__ = [
     "Linearisation",
-    "linearise",
     "linearise_chain",
     "coordinates_of",
     "ball_entries",

@@ -59,7 +59,7 @@ from typing import Any
 import numpy as np
 
 from ..config import canonical_config, config_hash
-from ..layout import LYAPUNOV_TERMS, QUANTITIES, SUMMARY_MAX_SAMPLES, is_chain, summary_stride
+from ..layout import LYAPUNOV_TERMS, QUANTITIES, is_chain, summary_stride
 from ..results import RunResult, plain
 from .atomic import write_bytes_atomic
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, NotAResultFile, content_digest, data_digest_of,

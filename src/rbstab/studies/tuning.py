@@ -51,7 +51,6 @@ import xarray as xr
 
 from ..config import ConfigError, dump_yaml
 from ..config.loader import config_from_mapping
-from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine import ensure_compiled, kernel_groups
 from ..results import plain
 from ..engine.registry import DEFAULT_ENGINE, get_engine
@@ -67,7 +66,6 @@ from .design import (
     check_metrics,
     design_mappings,
     expand_metrics,
-    figure_columns,
     Members,
     members_of,
     nominal_figures,

@@ -1611,7 +1611,7 @@ def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray
     lead = states.shape[:-1] if states.ndim > 1 else (1,)
     time = np.ascontiguousarray(np.broadcast_to(np.asarray(time, dtype=float), lead)).reshape(-1)
     states = np.ascontiguousarray(states).reshape(-1, states.shape[-1])
-    m, n = states.shape[0], first.size
+    m = states.shape[0]
     rows = (np.zeros(m, dtype=np.int64) if tree_of is None else
             np.repeat(np.asarray(tree_of, dtype=np.int64), lead[-1]))  # each sample's tree
     params = first.params[None] if len(trees) == 1 else records_of(trees)
