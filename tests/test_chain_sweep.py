@@ -411,6 +411,32 @@ def test_a_chain_sweeps_parameter_columns_refuse_exactly_the_runs_each_validated
     _refused_as_each_run_alone(base, table, written, kinds=5)
 
 
+def test_a_one_body_trees_sweep_refuses_the_runs_whose_weight_nothing_holds_as_each_alone():
+    """One body on a ``free`` joint written as a tree: a run whose K_t leaves the weight
+    unheld under gravity is refused as validating it alone refuses it (as in one body's
+    spelling), beside a bad mass; with no gravity the same K_t is accepted."""
+    import warnings
+
+    from rbstab.config import load_config
+    from rbstab.config.loader import tree_resolved
+    from rbstab.config.paths import parse_any_key
+
+    rng = np.random.default_rng(3)
+    n = 60
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        base = tree_resolved(load_config(ROOT / "configs" / "examples" / "free_gravity.yaml").resolved)
+    table = {"bodies.body.k_t.2": np.where(rng.random(n) < 0.7, rng.uniform(2000, 4000, n), 0.0),
+             "bodies.body.mass": np.where(rng.random(n) < 0.9, rng.uniform(30, 50, n), 0.0),
+             "gravity.2": np.where(rng.random(n) < 0.6, -9.81, 0.0)}
+
+    def written(data, i):
+        for key, column in table.items():
+            parse_any_key(key).set(data, float(column[i]))
+
+    _refused_as_each_run_alone(base, table, written, kinds=2)
+
+
 def test_a_chain_sweeps_batch_is_each_runs_compiled_chain_bit_for_bit():
     """A worker's batch of a chain sweep's runs (records, parent points, initial states and h
     built from the table's columns, no configuration per run) holds, for every run, what

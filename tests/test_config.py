@@ -460,12 +460,25 @@ def test_definite_gains_and_unused_singular_gains_give_no_note():
     ],
 )
 def test_gravity_needs_gains_that_hold_the_weight(variant, gains, key, detail):
+    """Refused in either spelling: the same body written as a tree (``bodies``, ``joints``) is
+    refused in the same line, named by its own keys, wherever its ground point lies."""
+    from rbstab.config.loader import tree_resolved
+
     data = base(body={"gravity": [0, 0, -10]}, controller={"variant": variant, **gains})
     line = single_problem(data)
     assert line.startswith(f"config key '{key}': found ")
     assert "expected gains that hold the weight" in line
     assert "G = (0, 0, -410) N" in line and "there is no equilibrium" in line
     assert detail in line
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # singular gains: notes
+        tree = tree_resolved(config_from_mapping(base(controller={"variant": variant, **gains})).resolved)
+    tree["gravity"] = [0, 0, -10]
+    field = key.partition(".")[2]
+    tree_key = f"bodies.body.{field}" if field == "k_t" else f"joints.controller.{field}"
+    for ground in (tree["joints"][0]["parent_point"], [0.3, -0.2, 1.0]):
+        tree["joints"][0]["parent_point"] = ground
+        assert single_problem(tree) == line.replace(f"'{key}'", f"'{tree_key}'", 1)
 
 
 @pytest.mark.parametrize(

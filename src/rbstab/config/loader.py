@@ -390,17 +390,24 @@ def _validated(data: dict, default_name: str | None, source: str | None, overrid
         raise ConfigError(lines, source) from None
 
 
-def _check_weight(ctrl, mass: float, gravity: np.ndarray, used_gains: dict, boundary_layer: float,
-                  source: str | None, overrides: Sequence[str]) -> None:
-    """ConfigError when the gains leave the weight unheld (no equilibrium, :func:`unheld_weight`)."""
-    unheld = unheld_weight(ctrl.variant, mass, gravity, used_gains, boundary_layer)
+def _check_weight(chain: Chain, tree: Mapping, one_body: bool, source: str | None, overrides: Sequence[str]) -> None:
+    """ConfigError when the gains of one body on a point law to the ground leave its weight
+    unheld (no equilibrium, :func:`unheld_weight`), in either spelling (``tree``: the resolved
+    mapping in a tree's spelling; ``one_body``: written as one body, the message's keys its)."""
+    body, joint = chain.bodies[0], chain.joints[0]
+    used = VARIANTS[joint.variant].required_gains
+    gains = {g: getattr(body if g in BODY_GAINS else joint, g) for g in (*GAIN_NAMES, "k_s") if g in used}
+    unheld = unheld_weight(joint.variant, body.mass, chain.gravity, gains, joint.boundary_layer)
     if unheld is None:
         return
-    key, detail = unheld
-    found = short_repr(getattr(ctrl, key.partition(".")[2]))
-    line = f"config key '{key}': found {found}; expected gains that hold the weight ({detail})"
-    inputs = ("body.mass", "body.gravity", "controller.variant", *(f"controller.{g}" for g in used_gains))
+    name, detail = unheld[0].partition(".")[2], unheld[1]
+    section, owner = ("bodies", 0) if name in BODY_GAINS else ("joints", 0)
+    found = short_repr(tree[section][owner][name])
+    key = f"controller.{name}" if one_body else f"{section}.{tree[section][owner]['name']}.{name}"
+    inputs = (("body.mass", "body.gravity", "controller.variant", *(f"controller.{g}" for g in gains)) if one_body
+              else ("gravity", "bodies", "joints"))
     related = [o for o in overrides if any(_related(o.partition("=")[0].strip(), k) for k in inputs)]
+    line = f"config key '{key}': found {found}; expected gains that hold the weight ({detail})"
     raise ConfigError([line + "".join(f" [from override {_short_override(o)}]" for o in related)], source)
 
 
@@ -861,12 +868,9 @@ def _build(data: Any, *, default_name: str | None, source: str | None, overrides
     resolved = _one_body_resolved(run) if one_body else _tree_resolved(run)
     tree = _tree_of(resolved) if one_body else resolved
     chain = _chain(tree)
-    if one_body:
-        ctrl, body, joint = run.controller, chain.bodies[0], chain.joints[0]
-        used = VARIANTS[ctrl.variant].required_gains
-        used_gains = {g: getattr(body if g in BODY_GAINS else joint, g) for g in (*GAIN_NAMES, "k_s") if g in used}
-        _check_weight(ctrl, body.mass, chain.gravity, used_gains, joint.boundary_layer, source, overrides)
-    else:
+    if chain.size == 1 and chain.joints[0].variant in VARIANTS:  # one body on a point law to the ground
+        _check_weight(chain, tree, one_body, source, overrides)
+    if not one_body:
         _check_engine_scope(chain, resolved, source, overrides)
     simulation = _settings(resolved["simulation"])
     if not one_body or simulation.limits is not None:  # one body's x, v as written, or placed where point-fixed
@@ -875,9 +879,11 @@ def _build(data: Any, *, default_name: str | None, source: str | None, overrides
         _check_limits(chain, states, errors, simulation.limits, resolved["simulation"].get("limits") or {}, source,
                       overrides, one_body=one_body)
     if one_body:
-        definite = VARIANTS[ctrl.variant].definite_gains or tuple(used_gains)
+        ctrl = run.controller
+        used = [g for g in (*GAIN_NAMES, "k_s") if g in VARIANTS[ctrl.variant].required_gains]
+        definite = VARIANTS[ctrl.variant].definite_gains or tuple(used)
         notes = _notes(chain, ["body.inertia"], [("initial_state.theta", run.initial_state.theta)],
-                       [("controller.", {g: getattr(ctrl, g) for g in used_gains if g in definite})], source)
+                       [("controller.", {g: getattr(ctrl, g) for g in used if g in definite})], source)
         return RunConfig(name=run.name, chain=chain, initial_state=_written_state(resolved), simulation=simulation,
                          resolved=resolved, warnings=notes)
     gains = [(f"bodies.{i}.", {g: getattr(b, g) for g in BODY_GAINS}) for i, b in enumerate(run.bodies)]

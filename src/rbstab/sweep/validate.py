@@ -461,6 +461,37 @@ def _tree_parameter_flags(keys: Sequence[str], columns: Mapping[str, np.ndarray]
     return flagged
 
 
+#: A one-body tree's numbers that decide whether its weight is held (:func:`_unheld_flags`).
+_WEIGHT_FIELDS = {"bodies": {"mass", "k_t"}, "joints": {"k_c", "k_d", "k_s"}}
+
+
+def _unheld_flags(keys: Sequence[str], columns: Mapping[str, np.ndarray], templates: Sequence,
+                  template: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The runs among ``rows`` of one body on a point law to the ground (either spelling's
+    model) whose weight the parameter ``keys`` may leave unheld under gravity, which
+    validation refuses (:func:`rbstab.config.physics.unheld_weight`): every one whose K_t is
+    not positive on its diagonal and zero off it (then K_t alone holds any weight); the
+    schema decides."""
+    flagged = np.zeros(len(template), dtype=bool)
+    paths = [parse_any_key(k) for k in keys]
+    if not len(rows) or not any(p.section == "gravity" or p.steps[2:3] and p.steps[2] in _WEIGHT_FIELDS.get(p.section, ())
+                                for p in paths):
+        return flagged
+    fields = TableFields(templates, keys, {k: columns[k][rows] for k in keys}, template[rows])
+    for t in np.unique(template[rows]).tolist():
+        tree = templates[t]
+        joint = tree["joints"][0]
+        if len(tree["bodies"]) != 1 or joint["variant"] not in VARIANTS or point_fixed(joint["variant"]):
+            continue
+        mine = rows[template[rows] == t]
+        k_t = fields.get("bodies", f"{tree['bodies'][0]['name']}.k_t", [0.0] * 3, shape=(3, 3), only=t)
+        gravity = fields.get("gravity", "", shape=(3,), only=t)
+        with np.errstate(invalid="ignore"):
+            held = (np.diagonal(k_t, axis1=1, axis2=2) > 0).all(axis=1) & (np.count_nonzero(k_t, axis=(1, 2)) == 3)
+        flagged[mine[~held & np.any(gravity != 0, axis=1)]] = True
+    return flagged
+
+
 #: How close to the gimbal lock [rad] a run's |theta_2| (a body's or a joint's) may come
 #: before the columns' check of its initial state leaves it to the schema (which computes
 #: the same angle in another order).
@@ -542,6 +573,7 @@ def _validate_trees(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_ind
     others = [k for k in keys if k not in params]
     valid = np.array([t is not None for t in templates], dtype=bool)[template] & ~counted
     flagged = _tree_parameter_flags(params, columns, [t or {} for t in templates], template, np.flatnonzero(valid))
+    flagged |= _unheld_flags(params, columns, templates, template, np.flatnonzero(valid))
     states = [k for k in others if parse_any_key(k).section == "initial_state"]
     if others and states == others:  # parameters and initial states: both checked as columns
         flagged |= _tree_state_flags(states, columns, templates, template, np.flatnonzero(valid))
