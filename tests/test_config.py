@@ -500,6 +500,68 @@ def test_singular_gains_that_hold_the_weight_are_accepted(variant, gains):
     assert cfg.chain.joints[0].variant == variant
 
 
+def _written_as_a_tree(data: dict) -> dict:
+    """A one-body mapping as written (not validated) in a tree's spelling: its body ``body``
+    held at R to the ground point R by its joint ``controller``; a permanent body's x, v left
+    to be placed."""
+    d = copy.deepcopy(data)
+    body, ctrl, state = d.pop("body"), d.pop("controller"), d.pop("initial_state", {})
+    point = body.pop("attachment_point")
+    if "gravity" in body:
+        d["gravity"] = body.pop("gravity")
+    sat = ctrl.pop("saturation", None)
+    tree_body = {"name": "body", **body, **{g: ctrl.pop(g) for g in ("k_t", "l_t") if g in ctrl}}
+    joint = {"name": "controller", "parent": "ground", "parent_point": point, "child": "body", "child_point": point,
+             **ctrl}
+    if sat:
+        shape = {"shape": sat["shape"]} if "shape" in sat else {}
+        if "force_h" in sat:
+            tree_body["saturation"] = {"force_h": sat["force_h"], **shape}
+        if set(sat) & {"torque_n", "constraint_force"}:
+            joint["saturation"] = {**{k: sat[k] for k in ("torque_n", "constraint_force") if k in sat}, **shape}
+    if ctrl.get("variant") == "permanent":
+        state = {k: v for k, v in state.items() if k not in ("x", "v")}
+    d.update(bodies=[tree_body], joints=[joint], initial_state={"body": state})
+    for entry in d.get("disturbances") or ():
+        entry["body"] = "body"
+    return d
+
+
+_SIGN_LAW = {"variant": "sliding", "k_s": 100.0, "boundary_layer": 0.0}
+
+
+@pytest.mark.parametrize("data", [
+    base(controller={"variant": "permanent", "saturation": {"constraint_force": 10.0}}),
+    base(controller={**_SIGN_LAW, "saturation": {"constraint_force": 10.0}}),
+    base(controller=_SIGN_LAW, disturbances=[{"kind": "impulse", "value": [1, 0, 0], "start": 0.1}]),
+    base(controller={"variant": "permanent"}, simulation={"limits": {"constraint_error": 1.0}}),
+    base(initial_state={"theta": [0.0, 1.5705, 0.0]}),
+    base(disturbances=[{"kind": "impulse", "value": [1, 0, 0], "start": 1e9}]),
+    base(controller={"k_d": None}),
+    base(controller={"variant": "sliding", "k_s": None}),
+    base(simulation={"limits": {"position": 0.001}}, initial_state={"x": [1.0, 0.0, 0.0]}),
+    base(body={"gravity": [0, 0, -10]}, controller={"variant": "free", "k_t": [4100, 4100, 0]}),
+    base(body={"gravity": [0, 0, -10]}, controller={"k_t": ZERO, "k_d": [1, 1, 0]}),
+    base(body={"mass": -1.0}),
+    base(controller={"saturation": {"torque_n": 0.0}}),
+], ids=["pin_force_limit", "sign_law_force_limit", "sign_law_disturbed", "pin_error_bound", "gimbal_lock",
+        "late_disturbance", "missing_k_d", "missing_k_s", "start_outside_limits", "free_weight_unheld",
+        "embedded_weight_unheld", "negative_mass", "zero_torque_limit"])
+def test_what_one_body_refuses_its_tree_spelling_refuses_naming_the_same_key(data):
+    """Refusal follows the physics, not the spelling: each one-body input refused is refused
+    written as a tree too, in one line whose key is the same value's in the tree's keys
+    (:func:`rbstab.config.loader.tree_keys`; a list entry by its name or its position)."""
+    from rbstab.config.loader import tree_keys
+
+    data = {section: value for section, value in data.items() if value is not None}
+    data["controller"] = {k: v for k, v in data["controller"].items() if v is not None}
+    line = single_problem(data)
+    tree_line = single_problem(_written_as_a_tree(data))
+    key = line.split("'")[1]
+    tree_key = tree_line.split("'")[1].replace("bodies.0.", "bodies.body.").replace("joints.0.", "joints.controller.")
+    assert tree_key in tree_keys(key), (line, tree_line)
+
+
 def test_unheld_weight_names_the_override(tmp_path):
     path = write(tmp_path, yaml.safe_dump(base(controller={"variant": "free"})))
     overrides = ["controller.k_t=[1, 1, 0]", "body.gravity=[0, 0, -10]", "simulation.t_end=1"]
