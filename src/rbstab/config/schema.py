@@ -973,7 +973,26 @@ class _Simulation(_Section):
         return self
 
 
-class RunSchema(_Section):
+class _Run(_Section):
+    """What both spellings of a run share: its sections' validators (the fields are each
+    spelling's own)."""
+
+    @field_validator("disturbances", mode="before", check_fields=False)
+    @classmethod
+    def _few_disturbances(cls, value: Any) -> Any:
+        if isinstance(value, (list, tuple)) and len(value) > MAX_DISTURBANCES:
+            raise PydanticCustomError("rbstab_invalid", "too many disturbances", {
+                "key": "disturbances", "found": f"{len(value)} entries",
+                "expected": f"at most {MAX_DISTURBANCES} disturbances"})
+        return value
+
+    @field_validator("initial_state", "simulation", mode="before", check_fields=False)
+    @classmethod
+    def _empty_section(cls, value: Any) -> Any:
+        return {} if value is None else value  # "simulation:" with every line commented out
+
+
+class RunSchema(_Run):
     """The whole run configuration (pydantic model; the public result is ``RunConfig``)."""
 
     name: Annotated[Any, checked(run_name)] = Field(
@@ -991,15 +1010,6 @@ class RunSchema(_Section):
     disturbances: list[_Disturbance] | None = Field(
         None, json_schema_extra={"max_entries": MAX_DISTURBANCES}, description=f"a list of at most {MAX_DISTURBANCES} disturbances, each {_mapping_of(_Disturbance)} "
                           "(optional; docs/disturbances.md)")
-
-    @field_validator("disturbances", mode="before")
-    @classmethod
-    def _few_disturbances(cls, value: Any) -> Any:
-        if isinstance(value, (list, tuple)) and len(value) > MAX_DISTURBANCES:
-            raise PydanticCustomError("rbstab_invalid", "too many disturbances", {
-                "key": "disturbances", "found": f"{len(value)} entries",
-                "expected": f"at most {MAX_DISTURBANCES} disturbances"})
-        return value
 
     @model_validator(mode="after")
     def _disturbances_fit_the_run(self) -> "RunSchema":
@@ -1028,11 +1038,6 @@ class RunSchema(_Section):
                 "expected": "no bound with variant 'permanent'",
                 "detail": "C is pinned: E = 0 at every instant; bound theta, omega, position or velocity"})
         return self
-
-    @field_validator("initial_state", "simulation", mode="before")
-    @classmethod
-    def _empty_section(cls, value: Any) -> Any:
-        return {} if value is None else value  # "simulation:" with every line commented out
 
     @field_validator("simulation", mode="after")
     @classmethod
@@ -1392,7 +1397,7 @@ def _names_list(names: Sequence[str]) -> str:
     return ", ".join(f"'{n}'" for n in names)
 
 
-class ChainSchema(_Section):
+class ChainSchema(_Run):
     """A chain configuration (pydantic model; the public result is
     :class:`rbstab.config.RunConfig`): 1 to :data:`rbstab.chain.MAX_BODIES` bodies,
     each held by exactly one joint to the ground or to a body listed before it (a tree)."""
@@ -1420,20 +1425,6 @@ class ChainSchema(_Section):
                 "key": "bodies", "found": f"{len(value)} bodies",
                 "expected": f"a list of 1 to {MAX_BODIES} bodies (the most one chain holds)"})
         return value
-
-    @field_validator("disturbances", mode="before")
-    @classmethod
-    def _few_disturbances(cls, value: Any) -> Any:
-        if isinstance(value, (list, tuple)) and len(value) > MAX_DISTURBANCES:
-            raise PydanticCustomError("rbstab_invalid", "too many disturbances", {
-                "key": "disturbances", "found": f"{len(value)} entries",
-                "expected": f"at most {MAX_DISTURBANCES} disturbances"})
-        return value
-
-    @field_validator("initial_state", "simulation", mode="before")
-    @classmethod
-    def _empty_section(cls, value: Any) -> Any:
-        return {} if value is None else value
 
     @field_validator("initial_state", mode="before")
     @classmethod
