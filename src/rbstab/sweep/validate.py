@@ -473,9 +473,9 @@ def _unheld_flags(keys: Sequence[str], columns: Mapping[str, np.ndarray], templa
     not positive on its diagonal and zero off it (then K_t alone holds any weight); the
     schema decides."""
     flagged = np.zeros(len(template), dtype=bool)
-    paths = [parse_any_key(k) for k in keys]
-    if not len(rows) or not any(p.section == "gravity" or p.steps[2:3] and p.steps[2] in _WEIGHT_FIELDS.get(p.section, ())
-                                for p in paths):
+    weighty = [p.section == "gravity" or p.steps[2:3] and p.steps[2] in _WEIGHT_FIELDS.get(p.section, ())
+               for p in map(parse_any_key, keys)]
+    if not len(rows) or not any(weighty):
         return flagged
     fields = TableFields(templates, keys, {k: columns[k][rows] for k in keys}, template[rows])
     for t in np.unique(template[rows]).tolist():
