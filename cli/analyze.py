@@ -283,7 +283,8 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
 @click.option("--push-point", default=None, metavar="X,Y,Z",
               help="Where a force push acts [m], body frame, from the centre of mass  [default: 0,0,0].")
 @click.option("--push-body", default=None, metavar="NAME",
-              help="A chain's body that is pushed (its frame for --push-point and a torque); chains only.")
+              help="A chain's body that is pushed (its frame for --push-point and a torque); chains only (a chain "
+              "of one body: that body by default).")
 @click.option("--push-directions", type=int, default=None, metavar="N",
               help="N quasi-uniform directions on the sphere (seeded by --seed), then a local search around the "
               "weakest  [default: 64].")
@@ -358,7 +359,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     if push_body is not None and len(bodies) < len(loaded) + len(specs):
         raise click.UsageError("--push-body: names the body of a chain that is pushed; a one-body config has one")
     for what, names in bodies.items():
-        if pushed and push_body not in names:
+        if pushed and push_body not in names and not (push_body is None and len(names) == 1):
             found = "none" if push_body is None else f"'{push_body}'"
             raise click.UsageError(f"--push-body: found {found} for {what}; expected the body of the chain that is "
                                    f"pushed ({', '.join(names)})")

@@ -451,6 +451,33 @@ def test_a_chain_pushed_at_t0_keeps_its_own_disturbances_and_t0_is_inside_the_ru
         assert bool(ok[0] == 1 and abs(v[0]) <= pushes.ratio * pushes.energy(vector)[0] + 1e-12) == verdict
 
 
+def test_a_tree_of_one_body_is_pushed_without_naming_its_body(tmp_path):
+    """A tree of one body has one body to push: ``--push-body`` may be left out (its body by
+    default), with the verdicts and the text of the push named."""
+    import yaml
+    from click.testing import CliRunner
+
+    from rbstab.analysis.push import Pushes
+    from rbstab.config.loader import tree_resolved
+    from rbstab_cli.main import cli
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        one = load_config(ROOT / "configs" / "examples" / "stance_ankle.yaml", ["simulation.t_end=2"])
+    tree = tree_spelling(one)
+    default, named = Pushes(tree, "torque"), Pushes(tree, "torque", body="body")
+    assert default.body == named.body == "body"
+    vectors = np.array([[0.0, 5.0, 0.0], [0.0, 400.0, 0.0]])
+    assert default.recovered(vectors).tolist() == named.recovered(vectors).tolist() == [True, False]
+    path = tmp_path / "tree.yaml"
+    path.write_text(yaml.safe_dump(tree_resolved(one.resolved)))
+    args = ["analyze", str(path), "--push", "torque", "--push-direction", "0,1,0", "--no-certificate", "-j", "1"]
+    texts = [CliRunner().invoke(cli, [*args, *extra, "-o", str(tmp_path / str(i))])
+             for i, extra in enumerate(([], ["--push-body", "body"]))]
+    assert all(t.exit_code == 0 for t in texts), texts[0].output
+    assert texts[0].output.replace(str(tmp_path / "0"), "") == texts[1].output.replace(str(tmp_path / "1"), "")
+
+
 def test_an_impulse_in_a_chain_config_is_the_push_applied_where_it_starts():
     """An impulse on the lower body at 0.3 s (and a torque impulse at t = 0): the compiled
     driver and the scipy reference (a new solve_ivp from each impulse) agree; the sample at

@@ -138,7 +138,8 @@ class Pushes:
         Validated; its own disturbances stay (the push is one more entry).
     kind : {"force", "torque"}
     body : str, optional
-        The body pushed: one of a tree's bodies (required for a tree), None for one body.
+        The body pushed: one of a tree's bodies (required for a tree of several; a tree of one
+        body: that body by default), None for one body.
     point : (3,) float, optional
         R_p [m], the pushed body's frame, from its centre of mass (force only; default 0).
     at : float
@@ -178,10 +179,12 @@ class Pushes:
         self.kind, self.at, self.ratio = kind, float(at), float(ratio)
         self.point = np.zeros(3) if point is None or kind == "torque" else np.asarray(point, dtype=float)
         self.units = PUSH_KINDS[kind]
-        self.body = body
         tree = is_chain(config)
         chain = config.chain  # one body: its one-body chain (the same model)
         names = list(chain.body_names)
+        if tree and body is None and len(names) == 1:  # a tree of one body: that body
+            body = names[0]
+        self.body = body
         if tree and body not in names:
             found = "none" if body is None else f"'{body}'"
             raise ValueError(f"--push-body: found {found}; expected the body of the chain that is pushed "
