@@ -117,7 +117,7 @@ def test_a_chain_run_stops_where_it_leaves_the_admissible_region(tmp_path):
                                       *SHORT, "-o", str(tmp_path)])
     assert result.exit_code == 0 and "Traceback" not in result.output  # it fell: a result
     assert "stance_ankle_hip: failed, fell (" in result.output
-    assert "left the admissible region (simulation.limits): |theta_1| of trunk reached 0.2 at t = " in result.output
+    assert "left the admissible region: |theta_1| of trunk reached simulation.limits.theta = 0.2 rad at t = " in result.output
     with xr.open_dataset(tmp_path / "stance_ankle_hip.h5", engine="h5netcdf") as ds:
         theta = ds["theta"].values
     finite = np.isfinite(theta[:, 1, 0])

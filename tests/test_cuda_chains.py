@@ -73,7 +73,7 @@ def test_simulated_basin_map_of_a_tree_streams_the_cpus_map(simulated):
     found = simulated["basin"]
     assert found["differences"] == []
     assert all(found["counts"][outcome] > 0 for outcome in ("converged", "not converged", "failed")), found
-    assert found["messages"] == ["left the admissible region (simulation.limits): |theta_1| of trunk reached 0.101"]
+    assert found["messages"] == ["left the admissible region: |theta_1| of trunk reached simulation.limits.theta = 0.101 rad"]
 
 
 @pytest.mark.slow

@@ -820,7 +820,7 @@ def _tree_call(batch: RunBatch, members: np.ndarray, integrate, gpu: bool, strid
 def _tree_left_region(what: str, t: float) -> str:
     """The message of a tree's run that left its admissible region at t [s] through the
     bound ``what`` (:func:`rbstab.variants.chain.bound_reached`), on every engine."""
-    return f"left the admissible region (simulation.limits): {what} at t = {t:.6g} s"
+    return f"left the admissible region: {what} at t = {t:.6g} s"
 
 
 def _range_left(compiled, joint: int, coordinate: int, upper: bool, t: float) -> str:

@@ -38,7 +38,8 @@ from ..kinematics import (IDENTITY, ZERO, add, axis_angle, axis_rotation, cross,
                           quadratic_form,
                           right_jacobian_inverse, rotation_and_rate_of, rotation_matrix, rotation_vector, sub,
                           universal_angles, universal_rate, universal_rotation, vector, vector_rotation)
-from ..layout import AXES, BEYOND_PAPER, JOINT_CODES, LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, POINT_FIXED, SATURATION_FLAGS, VARIANT_CODES
+from ..layout import AXES, BEYOND_PAPER, JOINT_CODES, LEFT_OUT, LIMITED_COMPONENTS, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, \
+    POINT_FIXED, SATURATION_FLAGS, VARIANT_CODES, display_units
 from ..model import (
     PARAMETERS,
     force_h,
@@ -1452,11 +1453,13 @@ def gimbal_lock_message(compiled: CompiledChain, part: int, joint: bool, margin:
 def bound_reached(compiled: CompiledChain, quantity: str, axis: int, part: int, bound: float) -> str:
     """In words, the bound ``bound`` (the quantity's units) of ``simulation.limits`` that
     body ``part`` of the tree reached on ``axis`` (0-2) of ``quantity`` (one of
-    :data:`rbstab.layout.LIMITED`; for ``constraint_error``, E_j of joint ``part``); e.g.
-    ``"|theta_1| of trunk reached 0.2"``."""
-    if quantity == "constraint_error":
-        return f"|E_{axis + 1}| of joint {compiled.chain.joint_names[part]} reached {bound:g}"
-    return f"|{quantity}_{axis + 1}| of {compiled.chain.body_names[part]} reached {bound:g}"
+    :data:`rbstab.layout.LIMITED`; for ``constraint_error``, E_j of joint ``part``), in the
+    words of one body's message; e.g. ``"|theta_1| of trunk reached simulation.limits.theta =
+    0.2 rad"``."""
+    owner = (f"joint {compiled.chain.joint_names[part]}" if quantity == "constraint_error"
+             else compiled.chain.body_names[part])
+    return (f"|{LIMITED_COMPONENTS[quantity]}_{axis + 1}| of {owner} reached simulation.limits.{quantity} = "
+            f"{bound:g} {display_units(OUTPUTS[quantity].units)}")
 
 
 def region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float, tuple[int, int, int]]:
