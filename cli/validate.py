@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from rbstab.layout import is_chain
+from rbstab.layout import is_chain, joint_kind
 
 from ._common import (config_error_text, load_one, show_config_warnings, stiffness_warnings,
                       template_stiffness_warnings)
@@ -104,7 +104,7 @@ def _tree(chain: dict) -> list[str]:
                 reference = f"{reference:g}" if reference else None
             elif reference is not None:
                 reference = point(reference) if any(reference) else None
-            unit = "m" if j["variant"] == "slide" else "rad"
+            unit = joint_kind(j["variant"]).unit
             span = j.get("range")
             span = None if span is None else f"[{span[0]:g}, {span[1]:g}]" if isinstance(span[0], (int, float)) else \
                 f"[{point(span[0])}, {point(span[1])}]"

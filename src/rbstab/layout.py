@@ -63,6 +63,7 @@ __all__ = [
     "JointKind",
     "JOINT_KINDS",
     "JOINT_KIND_OF",
+    "joint_kind",
     "JOINT_CODES",
     "REDUCED_STATES",
     "VELOCITIES",
@@ -673,6 +674,12 @@ class JointKind:
     blocks : tuple of (str, int)
         The child's reduced states as named blocks (name, entries), in order: what a tree's
         linearisation calls them (:data:`BLOCK_UNITS` gives their units).
+    axes : int
+        Its coordinates along fixed axes (turns about them, a slide's translation; 0 for the
+        balls and the free body): its gains, reference, limits and range are numbers per
+        coordinate, its child's initial state q, u.
+    unit : str
+        The unit of its coordinates q, of its reference and of its range's ends.
     """
 
     name: str
@@ -682,6 +689,8 @@ class JointKind:
     coordinates: str
     domain: str
     blocks: tuple
+    axes: int = 0
+    unit: str = "rad"
 
     @property
     def size(self) -> int:
@@ -702,7 +711,7 @@ JOINT_KINDS = {
     "hinge": JointKind("hinge", 1, 1, True,
                        "q [rad], the angle of A_rel = exp(q [a]x) about the joint's unit axis a (the parent's and "
                        "the child's frames, which it leaves fixed); u = dq/dt [rad/s]",
-                       "every q (a hinge has no singular angle)", (("q", 1), ("u", 1))),
+                       "every q (a hinge has no singular angle)", (("q", 1), ("u", 1)), axes=1),
     "ball": JointKind("ball", 4, 3, True,
                       "the unit quaternion of A_rel = A_p' A_c (w, x, y, z); Omega_j [rad/s], child frame",
                       "every orientation (no singular one)", (("quaternion", 4), ("joint_omega", 3))),
@@ -711,12 +720,13 @@ JOINT_KINDS = {
                            "a_1 (the parent's frame), then about the unit axis a_2 (the child's frame); u = dq/dt "
                            "[rad/s]",
                            "every q (a_1 and a_2 not parallel: the joint has no singular angle)",
-                           (("q", 2), ("u", 2))),
+                           (("q", 2), ("u", 2)), axes=2),
     "slide": JointKind("slide", 1, 1, True,
                        "q [m], the displacement of the child's point C from the parent's point along the joint's "
                        "unit axis a (the parent's frame; A_rel = I: the child keeps its parent's orientation); u = "
                        "dq/dt [m/s]",
-                       "every q (a slide has no singular place)", (("translation", 1), ("translation_rate", 1))),
+                       "every q (a slide has no singular place)", (("translation", 1), ("translation_rate", 1)),
+                       axes=1, unit="m"),
 }
 #: Each joint's ``variant`` -> its joint kind: the paper's ``permanent`` joint is the ball in
 #: Euler angles, the four point laws pull a free body, ``hinge`` turns the child about an axis.
@@ -736,11 +746,16 @@ POINT_FIXED = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].point_fixed for v in JOINT
 #: Each joint code's coordinates along fixed axes, each with dq/dt = u: the turns about
 #: them (a hinge's 1, a universal's 2), a slide's translation (1); 0 for the balls and the
 #: free body.
-AXES = np.array([{"hinge": 1, "universal": 2, "slide": 1}.get(JOINT_KIND_OF[v], 0) for v in JOINT_CODES],
-                dtype=np.int64)
+AXES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].axes for v in JOINT_CODES], dtype=np.int64)
 #: Whether each joint code is a kind beyond the paper's laws (a hinge, a universal joint, the
 #: quaternion ball): a tree with one runs and is linearised in its reduced state only.
 BEYOND_PAPER = np.array([v not in VARIANT_CODES for v in JOINT_CODES], dtype=np.bool_)
+
+
+def joint_kind(variant: str) -> JointKind:
+    """The joint-kind table's row of a joint's ``variant`` (KeyError for a name that is no
+    joint's)."""
+    return JOINT_KINDS[JOINT_KIND_OF[variant]]
 
 
 def point_fixed(variant: str) -> bool:

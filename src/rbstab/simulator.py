@@ -45,7 +45,7 @@ from .engine.registry import DEFAULT_ENGINE, get_engine
 from .engine.status import (GIMBAL_LOCK, RANGE_LEFT, STEP_LIMIT, SUCCESS, TIMEOUT, gimbal_of, gimbal_status, limit_of,
                             limit_part, limit_status, range_of, status_message)
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
-from .layout import LIMITED, OUTPUTS, QUANTITIES, SUMMARY_FIGURES, VARIANT_LAYOUTS, is_chain, summary_stride
+from .layout import LIMITED, OUTPUTS, QUANTITIES, SUMMARY_FIGURES, VARIANT_LAYOUTS, is_chain, joint_kind, summary_stride
 from .results import RunBlock, RunResult, row
 from .summary import numerical_rate, pressure_samples, summarize, tree_stream_table, tree_summary_table
 from .variants.paper import paper_form, paper_initial_state
@@ -837,7 +837,7 @@ def _range_left(compiled, joint: int, coordinate: int, upper: bool, t: float) ->
             f"the turn of joint {name} (its angle from the reference pose)" if variant == "ball" else
             f"theta_{coordinate + 1} of joint {name}'s Euler angles Theta_j")
     return (f"left the admissible region (joints.{name}.range): {what} reached its "
-            f"{'upper' if upper else 'lower'} end {end:g} {'m' if variant == 'slide' else 'rad'} at t = {t:.6g} s")
+            f"{'upper' if upper else 'lower'} end {end:g} {joint_kind(variant).unit} at t = {t:.6g} s")
 
 
 def run_end(compiled, code: int, t_stop: float, settings: np.ndarray, bounds: np.ndarray,

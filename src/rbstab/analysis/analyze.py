@@ -33,7 +33,7 @@ from ..config.schema import limits_violation
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine.registry import DEFAULT_ENGINE
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..layout import is_chain
+from ..layout import is_chain, joint_kind
 from ..variants import VARIANTS
 from ..variants.paper import has_paper_form
 from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
@@ -433,7 +433,7 @@ def _outside_limits(compiled, rest: np.ndarray, limits, one_body: bool) -> str |
                     joint.variant, f"theta_{i + 1} of Theta_j")
                 return (f"the {_REST[one_body]} lies outside joints.{joint.name}.range (an admissible region): its "
                         f"{what} is {'above' if value > upper else 'below'} {upper if value > upper else lower:g} "
-                        f"{'m' if joint.variant == 'slide' else 'rad'}")
+                        f"{joint_kind(joint.variant).unit}")
     if limits is None:
         return None
     errors = np.asarray(outputs["constraint_error"], dtype=float)[0]

@@ -30,7 +30,8 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from ..chain import MAX_BODIES, PARALLEL_AXES
-from ..layout import BLOCK_UNITS, LIMITED, LIMITED_COMPONENTS, OUTPUTS, display_units, point_fixed
+from ..layout import BLOCK_UNITS, JOINT_KIND_OF, LIMITED, LIMITED_COMPONENTS, OUTPUTS, display_units, joint_kind, \
+    point_fixed
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, MAX_DISTURBANCES, SATURATION_SHAPES, Limits
 from ..variants import VARIANTS
 from .physics import SINGULAR_RTOL
@@ -432,7 +433,7 @@ JOINT_VARIANTS = (*VARIANTS, "hinge", "universal", "ball", "slide")
 #: The joint kinds whose coordinates are along fixed axes (turns about them, a slide's
 #: translation): their child's initial state is q, u; their gains, references and limits are
 #: numbers per coordinate.
-AXES_VARIANTS = ("hinge", "universal", "slide")
+AXES_VARIANTS = tuple(v for v in JOINT_KIND_OF if joint_kind(v).axes)
 
 
 

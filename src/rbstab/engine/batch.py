@@ -31,7 +31,7 @@ import numpy as np
 from ..chain import hinge_vectors
 from ..config.loader import config_from_mapping, placed_initial_state, tree_keys, tree_resolved
 from ..config.paths import parse_any_key
-from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, is_chain
+from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, is_chain, joint_kind
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, set_limits
 from ..variants import chain as C
 from ..variants.registry import record_offsets
@@ -466,16 +466,17 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
         p[name] = of("bodies", name, zero, shape=(3, 3))
     hinged = joint.variant == "hinge"  # its gains, reference and limits numbers about its axis
     coordinates = {"universal": (2,), "slide": ()}.get(joint.variant)  # numbers per coordinate, entries of 3-vectors
+    on_axes = joint_kind(joint.variant).axes > 0  # gains, reference and passive torque: numbers per coordinate
     for name in ("k_r", "l_r", "k_c", "l_c", "k_d", "l_d"):
-        if not (joint.variant in ("hinge", "universal", "slide") and name in ("k_r", "l_r")):
+        if not (on_axes and name in ("k_r", "l_r")):
             p[name] = of("joints", name, zero, shape=(3, 3))
     if joint.l_d is not None:
         p["l_d_inv"] = _inverse(p["l_d"])
     p["k_s"] = of("joints", "k_s", 0.0)
     p["boundary_layer"] = of("joints", "boundary_layer", 0.0)
-    if joint.variant not in ("hinge", "universal", "slide"):
+    if not on_axes:
         p["theta_ref"] = of("joints", "theta_ref", zero, shape=(3,))
-    if joint.passive is not None and joint.variant not in ("hinge", "universal", "slide"):
+    if joint.passive is not None and not on_axes:
         p["passive"] = 1.0
         p["passive_k_r"] = of("joints", "passive.k_r", zero, shape=(3, 3))
         p["passive_l_r"] = of("joints", "passive.l_r", zero, shape=(3, 3))

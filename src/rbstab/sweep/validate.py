@@ -34,8 +34,8 @@ from ..results import plain
 from ..config import ConfigError, PhysicalPlausibilityWarning
 from ..config.loader import config_from_mapping, initial_state_fits
 from ..config.paths import KeyPath, parse_any_key, parse_key, schema_of
-from ..config.schema import (INITIAL_STATE_BLOCKS, MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, inside_limits,
-                             samples_apart, starts_in_run, steps_suffice, within_bounds)
+from ..config.schema import (AXES_VARIANTS, INITIAL_STATE_BLOCKS, MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock,
+                             inside_limits, samples_apart, starts_in_run, steps_suffice, within_bounds)
 from ..layout import LIMITED, VARIANT_LAYOUTS, point_fixed
 from ..variants import VARIANTS
 from ..variants.base import limited_values
@@ -567,7 +567,7 @@ def _validate_trees(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_ind
     that section); the others are validated by the schema."""
     keys = list(columns)
     hinges = {j.get("name") for t in templates if t for j in t.get("joints") or ()
-              if j.get("variant") in ("hinge", "universal", "slide")}
+              if j.get("variant") in AXES_VARIANTS}
     params = [k for k in keys if _tree_parameter(k, columns[k])
               and not (parse_any_key(k).section == "joints" and parse_any_key(k).steps[1] in hinges)]
     others = [k for k in keys if k not in params]
