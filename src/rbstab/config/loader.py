@@ -401,9 +401,10 @@ def _check_weight(chain: Chain, tree: Mapping, one_body: bool, source: str | Non
     if unheld is None:
         return
     name, detail = unheld[0].partition(".")[2], unheld[1]
-    section, owner = ("bodies", 0) if name in BODY_GAINS else ("joints", 0)
-    found = short_repr(tree[section][owner][name])
-    key = f"controller.{name}" if one_body else f"{section}.{tree[section][owner]['name']}.{name}"
+    section = "bodies" if name in BODY_GAINS else "joints"
+    entry = tree[section][0]  # the one body, or its joint
+    found = short_repr(entry[name])
+    key = f"controller.{name}" if one_body else f"{section}.{entry['name']}.{name}"
     inputs = (("body.mass", "body.gravity", "controller.variant", *(f"controller.{g}" for g in gains)) if one_body
               else ("gravity", "bodies", "joints"))
     related = [o for o in overrides if any(_related(o.partition("=")[0].strip(), k) for k in inputs)]
